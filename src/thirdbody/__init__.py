@@ -5,6 +5,7 @@ Public API::
     Material(E, nu)                     elastic constants (Pa, -)
     Grid(n, spacing)                    a window of cells (m)
     solve_normal(gap, grid, material, force=... | approach=...)   -> NormalContact
+    solve_tangential(normal, mu, force=... | shift=..., previous=...) -> TangentialContact
     reference.hertz, reference.mindlin  analytic solutions to check runs against
     citations()                         the papers behind the methods used
 """
@@ -13,10 +14,13 @@ from ._citations import citations
 from .bem import (
     ContactAtEdgeError,
     ConvergenceError,
+    FrictionLimitError,
     Grid,
     NormalContact,
+    TangentialContact,
     set_workers,
     solve_normal,
+    solve_tangential,
 )
 from .material import Material
 
@@ -25,11 +29,14 @@ __version__ = "0.1.0"
 __all__ = [
     "ContactAtEdgeError",
     "ConvergenceError",
+    "FrictionLimitError",
     "Grid",
     "Material",
     "NormalContact",
+    "TangentialContact",
     "__version__",
     "citations",
     "set_workers",
     "solve_normal",
+    "solve_tangential",
 ]

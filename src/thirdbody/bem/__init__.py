@@ -7,15 +7,19 @@ half-space given a gap.
 from .grid import Grid
 from .normal import ContactAtEdgeError, ConvergenceError, NormalContact, solve_normal
 from .operator import get_workers, normal_operator, set_workers, tangential_operator
+from .tangential import FrictionLimitError, TangentialContact, solve_tangential
 
 __all__ = [
     "ContactAtEdgeError",
     "ConvergenceError",
+    "FrictionLimitError",
     "Grid",
     "NormalContact",
+    "TangentialContact",
     "get_workers",
     "normal_operator",
     "set_workers",
     "solve_normal",
+    "solve_tangential",
     "tangential_operator",
 ]

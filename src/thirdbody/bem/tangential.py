@@ -1,0 +1,409 @@
+"""Incremental partial-slip (Coulomb) tangential contact of a rigid plate on the particle.
+
+One load step: given the normal solution (pressure p, contact set) and the previous converged
+traction τ⁰, the plate makes a rigid tangential shift increment Δs (m, 2-vector). The particle's
+surface moves by Δu = K (τ - τ⁰) (Cerruti influence coefficients, x-y coupling through ν,
+Goodman approximation: no normal-tangential coupling, exact for ν = 0.5). Coulomb's law with
+history (the paper's eq 7, with the friction disc |τ| <= μp rather than a box per component):
+
+* stick cells (|τ| < μp): Δu = Δs, the surface follows the plate;
+* slip cells: |τ| = μp and τ points along the relative slip w = Δs - Δu of the plate over the
+  particle (the plate drags the particle along).
+
+Equivalently τ minimises ½ (τ-τ⁰)ᵀ K (τ-τ⁰) - Δs·Σ(τ-τ⁰)ΔA over the discs; with a prescribed
+force Q the constraint Σ τ ΔA = Q replaces Δs, which becomes its multiplier.
+
+Solver: an active-set method in the spirit of Kalker's CONTACT (Vollebregt 2014): with the slip
+cells and their slip directions fixed, the stick tractions solve a linear symmetric positive
+definite problem, handled by conjugate gradients preconditioned with the inverse 2x2 kernel
+spectrum; an outer loop moves cells between stick and slip and updates slip directions.
+
+Sign conventions: traction is what the plate exerts on the particle (Pa); displacements are the
+particle surface's (m), parallel to the traction that causes them; the shift is the plate's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._citations import cites
+from .normal import ConvergenceError, NormalContact
+from .operator import tangential_operator
+
+_KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Contact. Kluwer; "
+           "Vollebregt, E. A. H. (2014). J. Comput. Phys. 257, 333-351 (CG with FFT "
+           "preconditioner).")
+
+
+_DEBUG = False
+
+
+class FrictionLimitError(ValueError):
+    """A prescribed tangential force exceeds what friction can transmit, μ·F_N."""
+
+
+@dataclass(frozen=True)
+class TangentialContact:
+    """One converged incremental tangential step.
+
+    Attributes
+    ----------
+    traction : (2, ny, nx) array
+        (τ_x, τ_y) exerted by the plate on the particle, Pa; zero outside the contact.
+    displacement : (2, ny, nx) array
+        Tangential elastic displacement of the particle surface, m (total, from zero traction).
+    shift : (2,) array
+        Rigid tangential displacement of the plate, m, accumulated over the steps.
+    force : (2,) array
+        Total tangential force Σ τ ΔA, N.
+    stick, slip : (ny, nx) bool arrays
+        Stick and slip cells (both inside the contact).
+    slip_increment : (2, ny, nx) array
+        Relative slip of the plate over the particle in this step, Δs - Δu (m), zero in stick.
+    mu : float
+    normal : NormalContact
+        The normal solution this step was solved on.
+    iterations : int
+        Conjugate-gradient iterations (all outer passes).
+    residual : float
+        Coulomb complementarity residual max_i |τ_i - Π_i(τ_i + w_i/k₀)| / (μ max p), with Π_i
+        the projection on the friction disc and k₀ the self-compliance: zero iff every cell
+        obeys stick or slip exactly.
+    converged : bool
+    full_sliding : bool
+        Every contact cell slides (|τ| = μp everywhere).
+    """
+
+    traction: np.ndarray
+    displacement: np.ndarray
+    shift: np.ndarray
+    force: np.ndarray
+    stick: np.ndarray
+    slip: np.ndarray
+    slip_increment: np.ndarray
+    mu: float
+    normal: NormalContact = field(repr=False)
+    iterations: int
+    residual: float
+    converged: bool
+    full_sliding: bool
+    methods: tuple[str, ...] = ("kalker_tangcg", "love1929", "dcfft")
+
+    @property
+    def stick_area(self) -> float:
+        """Area of the stick zone, m²."""
+        return float(self.stick.sum()) * self.normal.grid.cell_area
+
+
+def coulomb_residual(traction: np.ndarray, slip_increment: np.ndarray, pressure: np.ndarray,
+                     mu: float, self_compliance: float) -> float:
+    """Natural residual of Coulomb's law (see :class:`TangentialContact`), dimensionless."""
+    trial = traction + slip_increment / self_compliance
+    norm = np.hypot(trial[0], trial[1])
+    limit = mu * pressure
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
+    diff = traction - trial * factor
+    scale = mu * float(pressure.max())
+    return float(np.hypot(diff[0], diff[1]).max() / scale) if scale > 0 else 0.0
+
+
+def _project_on_discs(tau: np.ndarray, limit: np.ndarray) -> np.ndarray:
+    norm = np.hypot(tau[0], tau[1])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
+    return tau * factor
+
+
+@cites("kalker_tangcg", _KALKER)
+def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA: float,
+                force: np.ndarray | None, shift: np.ndarray | None, tol: float,
+                scalar: bool, max_outer: int, max_inner: int):
+    """Solve one step on a window. Returns (tau, du, ds, stick, iterations, residual)."""
+    force_control = force is not None
+    ncomp = 1 if scalar else 2
+    sxx, sxy, syy = K.spectra
+    T = K._t
+    if scalar:
+        inv = (1.0 / sxx,)
+    else:
+        det = sxx * syy - sxy * sxy
+        inv = (syy / det, -sxy / det, sxx / det)
+
+    def apply(t: np.ndarray) -> np.ndarray:
+        if scalar:
+            spec = T.forward(t[0])
+            spec *= sxx
+            return T.inverse(spec)[None]
+        return K(t)
+
+    def precondition(r: np.ndarray) -> np.ndarray:
+        if scalar:
+            spec = T.forward(r[0])
+            spec *= inv[0]
+            return T.inverse(spec)[None]
+        fx, fy = T.forward(r)
+        out = np.empty((2, *fx.shape), dtype=fx.dtype)
+        out[0] = inv[0] * fx + inv[1] * fy
+        out[1] = inv[1] * fx + inv[2] * fy
+        return T.inverse(out)
+
+    tau0 = tau0[:ncomp]
+    k0 = K.self_terms[0]
+    tau = tau0.copy()
+    slip = np.zeros_like(contact)
+    direction = np.zeros_like(tau0)
+    # cells with zero friction limit (p = 0 at the contact edge) carry no traction
+    zero_limit = contact & (limit <= 0)
+    stick = contact & ~zero_limit
+    loose = max(tol, 1e-4)
+    inner_tol = loose
+    iterations = 0
+    ds = np.zeros(ncomp) if force_control else np.asarray(shift, dtype=float)[:ncomp]
+    eye = np.eye(ncomp)
+    # curvature of |τ| = μp (the slip multiplier |w|/(μp)): the Newton term on rotations
+    curvature = np.zeros(contact.shape)
+
+    for _outer in range(max_outer):
+        # the admissible variations V: stick cells move freely, slip cells only rotate on their
+        # disc (tangent direction e_perp, scaled by the limit), other cells not at all
+        if scalar:
+            perp = np.zeros_like(direction)
+        else:
+            # rotations stiffer than the cell's own elastic stiffness are left to the projection
+            # update below (their slip direction is well defined); soft ones go into the CG
+            soft = slip & (curvature * k0 <= 1.0)
+            perp = np.stack([-direction[1], direction[0]]) * soft
+        gram = stick.sum() * eye
+        if not scalar:
+            gram = gram + np.einsum("iyx,jyx->ij", perp, perp)
+
+        def project(x: np.ndarray, constrain: bool = force_control, stick=stick, perp=perp,
+                    gram=gram) -> np.ndarray:
+            y = np.where(stick, x, 0.0)
+            if not scalar:
+                y += (x * perp).sum(axis=0) * perp
+            if constrain:
+                lam = np.linalg.lstsq(gram, y.reshape(ncomp, -1).sum(axis=1), rcond=None)[0]
+                y -= np.where(stick, lam[:, None, None], 0.0)
+                if not scalar:
+                    y -= (lam[:, None, None] * perp).sum(axis=0) * perp
+            return y
+
+        tau = np.where(slip, limit * direction, tau)
+        tau[:, ~contact] = 0.0
+        if force_control:
+            if not stick.any():
+                return None
+            mismatch = force[:ncomp] / dA - tau.reshape(ncomp, -1).sum(axis=1)
+            tau[:, stick] += (mismatch / stick.sum())[:, None]
+        du = apply(tau - tau0)
+        scale = max(float(np.abs(du).max()), float(np.abs(ds).max()), 1e-300)
+
+        def shift_estimate(du: np.ndarray, gram=gram, project=project) -> np.ndarray:
+            # the multiplier of the force constraint: Σ P_i (ds - du_i) = 0
+            return np.linalg.lstsq(gram, project(du, False).reshape(ncomp, -1).sum(axis=1),
+                                   rcond=None)[0]
+
+        if force_control:
+            ds = shift_estimate(du)
+        r = project(ds[:, None, None] - du)
+        if np.abs(r).max() > inner_tol * scale:
+            z = project(precondition(r))
+            t = z
+            rz = float(np.vdot(r, z))
+            for _inner in range(max_inner):
+                v = apply(t)
+                vs = project(v + curvature * t)
+                den = float(np.vdot(t, vs))
+                if not den > 0:
+                    break
+                alpha = rz / den
+                tau += alpha * t
+                du += alpha * v
+                r -= alpha * vs
+                iterations += 1
+                if np.abs(r).max() <= inner_tol * scale:
+                    break
+                z = project(precondition(r))
+                rz_new = float(np.vdot(r, z))
+                t = z + (rz_new / rz) * t
+                rz = rz_new
+            else:
+                return None
+            if force_control:
+                ds = shift_estimate(du)
+        w = ds[:, None, None] - du                       # relative slip of the plate
+        norm_tau = np.sqrt((tau * tau).sum(axis=0))
+        to_slip = stick & (norm_tau > limit)
+        along = (w * direction).sum(axis=0)
+        to_stick = slip & (along < 0)
+        keep = slip & ~to_stick
+        # slip tractions rotated in the tangent plane go back on the circle; stiff ones follow
+        # the projection of the trial traction τ + w/k₀
+        if not scalar:
+            trial = np.where(soft, tau, tau + w / k0)
+        else:
+            trial = tau
+        norm_trial = np.sqrt((trial * trial).sum(axis=0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            unit = np.where(slip, trial / np.where(norm_trial > 0, norm_trial, 1.0),
+                            tau / np.where(norm_tau > 0, norm_tau, 1.0))
+        turned = float((limit * np.abs(unit - direction))[:, keep].max(initial=0.0))
+        turned /= max(float(limit.max()), 1e-300)
+        if _DEBUG:
+            print("outer", _outer, "stick", int(stick.sum()), "slip", int(slip.sum()),
+                  "to_slip", int(to_slip.sum()), "to_stick", int(to_stick.sum()),
+                  "turned", turned, "its", iterations)
+        if not to_slip.any() and not to_stick.any() and turned <= inner_tol:
+            if inner_tol <= tol:
+                tau = np.where(slip, limit * unit, tau)
+                return tau, du, ds, stick, iterations
+            inner_tol = tol
+        direction = np.where(to_slip | keep, unit, direction)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            curvature = np.where(keep, np.sqrt((w * w).sum(axis=0)) / limit, 0.0)
+        slip = (slip & ~to_stick) | to_slip
+        stick = contact & ~slip & ~zero_limit
+    return None
+
+def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None,
+                     previous: TangentialContact | None = None, tol: float = 1e-8,
+                     scalar: bool = False, max_outer: int = 60,
+                     max_iter: int = 500) -> TangentialContact:
+    """Solve one incremental partial-slip step on top of a normal contact solution.
+
+    Parameters
+    ----------
+    normal : NormalContact
+        The current normal solution (pressure, contact set, grid, material).
+    mu : float
+        Coulomb friction coefficient (>= 0).
+    force : (2,) array_like or float, optional
+        Prescribed total tangential force (F_x, F_y) on the particle, N; a scalar means F_x.
+        Must not exceed μ·F_N in magnitude (:class:`FrictionLimitError`); equal to it means full
+        sliding.
+    shift : (2,) array_like or float, optional
+        Prescribed total rigid tangential displacement of the plate, m (scalar: x). Exactly one of
+        ``force`` and ``shift``.
+    previous : TangentialContact, optional
+        The last converged step (its traction is carried over: projected onto the new friction
+        discs, dropped where contact was lost; new contact cells start at zero traction). Without
+        it the step starts from zero traction and zero shift.
+    tol : float
+        Tolerance on the Coulomb residual (see :class:`TangentialContact`).
+    scalar : bool
+        Solve for τ_x only with a box |τ_x| <= μp (the classical scalar approximation that ignores
+        u_y); default False: the full x-y coupled problem with the friction disc.
+
+    Notes
+    -----
+    Goodman approximation: the tangential tractions do not change the pressure (exact for
+    ν = 0.5, a few percent at ν = 0.3).
+    """
+    if not (np.isfinite(mu) and mu >= 0):
+        raise ValueError(f"mu (friction coefficient) must be a finite number >= 0, got {mu!r}")
+    if (force is None) == (shift is None):
+        raise ValueError("give exactly one of force (N) and shift (m)")
+    grid, mat = normal.grid, normal.material
+    dA = grid.cell_area
+
+    def vec(v, name):
+        a = np.zeros(2)
+        v = np.atleast_1d(np.asarray(v, dtype=float))
+        if v.size not in (1, 2) or not np.isfinite(v).all():
+            raise ValueError(f"{name} must be a finite scalar or 2-vector, got {v!r}")
+        a[: v.size] = v
+        return a
+
+    p = normal.pressure
+    contact = normal.contact
+    limit = mu * p
+    FN = normal.force
+    prev_shift = np.zeros(2)
+    tau0 = np.zeros((2, *grid.shape))
+    if previous is not None:
+        if previous.traction.shape != tau0.shape:
+            raise ValueError("previous step was solved on a different grid")
+        prev_shift = np.asarray(previous.shift, dtype=float)
+        tau0 = _project_on_discs(np.where(contact, previous.traction, 0.0), limit)
+    K = tangential_operator(grid.shape, grid.spacing, mat.G, mat.nu)
+    k0 = K.self_terms[0]
+
+    if force is not None:
+        Q = vec(force, "force")
+        if scalar and Q[1] != 0:
+            raise ValueError("scalar=True solves x-loading only: force must have F_y = 0")
+        Qn = float(np.hypot(*Q))
+        cap = mu * FN
+        if Qn > cap * (1 + 1e-12):
+            raise FrictionLimitError(
+                f"tangential force {Qn:.6g} N exceeds the friction limit mu*F_N = {cap:.6g} N "
+                f"(mu = {mu}, F_N = {FN:.6g} N): the contact slides")
+        if Qn >= cap * (1 - 1e-12) and Qn > 0:
+            return _full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K)
+        ds_prescribed = None
+    else:
+        ds_prescribed = vec(shift, "shift") - prev_shift
+        if scalar and ds_prescribed[1] != 0:
+            raise ValueError("scalar=True solves x-loading only: shift must have s_y = 0")
+        Q = None
+
+    # work on the bounding box of the contact: tractions vanish outside it
+    rows = np.flatnonzero(contact.any(axis=1))
+    cols = np.flatnonzero(contact.any(axis=0))
+    if rows.size == 0:
+        raise ValueError("the normal solution has no contact")
+    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    Kb = tangential_operator((rows[-1] + 1 - rows[0], cols[-1] + 1 - cols[0]), grid.spacing,
+                             mat.G, mat.nu)
+    out = _active_set(Kb, tau0[(slice(None), *box)], limit[box], contact[box], dA,
+                      Q, ds_prescribed, tol, scalar, max_outer, max_iter)
+    if out is None:
+        raise ConvergenceError(
+            "tangential solver did not converge (stick/slip set or slip directions kept "
+            "changing); try a smaller load increment")
+    tau_b, _, ds, _, iterations = out
+    ncomp = tau_b.shape[0]
+    tau = np.zeros((2, *grid.shape))
+    tau[(slice(ncomp), *box)] = tau_b
+    dsv = np.zeros(2)
+    dsv[:ncomp] = ds
+    if ds_prescribed is not None:
+        dsv = ds_prescribed
+    return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol)
+
+
+def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False):
+    grid = normal.grid
+    contact = normal.contact
+    limit = mu * normal.pressure
+    du = K(tau - tau0)
+    w = ds[:, None, None] - du
+    w[:, ~contact] = 0.0
+    norm_tau = np.hypot(tau[0], tau[1])
+    slip = contact & (norm_tau >= limit * (1 - 1e-9))
+    stick = contact & ~slip
+    w[:, stick] = 0.0
+    residual = coulomb_residual(np.where(contact, tau, 0.0), w, normal.pressure, mu, k0)
+    if not residual <= max(tol, 1e-14) * 10:
+        raise ConvergenceError(f"tangential solver: Coulomb residual {residual:.3e} above "
+                               f"tol {tol:.1e}")
+    return TangentialContact(
+        traction=tau, displacement=K(tau), shift=prev_shift + ds,
+        force=tau.reshape(2, -1).sum(axis=1) * grid.cell_area, stick=stick, slip=slip,
+        slip_increment=w, mu=float(mu), normal=normal, iterations=iterations,
+        residual=residual, converged=True, full_sliding=bool(full or not stick.any()))
+
+
+def _full_sliding(normal, mu, e, tau0, prev_shift, K):
+    """τ = μp e everywhere in contact. The shift is the smallest one consistent with every cell
+    slipping along e: the plate has moved at least as far as the furthest surface point."""
+    tau = mu * normal.pressure * e[:, None, None]
+    tau[:, ~normal.contact] = 0.0
+    du = K(tau - tau0)
+    along = (du * e[:, None, None]).sum(axis=0)[normal.contact].max()
+    ds = e * along
+    return _finish(normal, mu, tau, tau0, ds, prev_shift, K, K.self_terms[0], 0, 1.0, full=True)
