@@ -16,6 +16,9 @@ $(VENV)/.installed-test: pyproject.toml | $(BIN)/activate
 	touch $@
 
 $(VENV)/.installed-bench: pyproject.toml | $(BIN)/activate
+	@# aspher builds from source and needs Eigen >= 3.4 (it cannot download it here)
+	@test -f /usr/share/eigen3/cmake/Eigen3Config.cmake || \
+		(apt-get update -qq && apt-get install -y -qq libeigen3-dev)
 	$(BIN)/pip install --quiet -e ".[test,bench]"
 	touch $@
 
