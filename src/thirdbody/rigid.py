@@ -32,6 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import brentq
 
+from ._validate import real
+
 __all__ = [
     "RigidState",
     "classify",
@@ -49,14 +51,7 @@ __all__ = [
 FloatOrArray = float | np.ndarray
 
 
-def _real(name: str, value: float, allowed: str, ok) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number in {allowed}, got {value!r}") from None
-    if not (math.isfinite(x) and ok(x)):
-        raise ValueError(f"{name} must be a finite number in {allowed}, got {value!r}")
-    return x
+_real = real
 
 
 def _point(name: str, point: Sequence[float]) -> tuple[float, float]:

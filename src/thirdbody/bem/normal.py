@@ -131,7 +131,6 @@ def _polonsky_keer(g: np.ndarray, K, dA: float, force: float | None, delta: floa
     G_old = 1.0
     conjugate = False
     inv_self = 1.0 / K.self_term
-    res = np.inf
     d = delta
     for it in range(1, max_iter + 1):
         S = p > 0
@@ -323,7 +322,7 @@ def _solve_levels(g: np.ndarray, spacing: tuple[float, float], E_star: float,
     if initial is None and min(g.shape) >= 2 * _COARSEST:
         coarse = _solve_levels(_restrict(g), (2 * dx, 2 * dy), E_star, force,
                                delta, max(tol, 1e-4), max_iter, None)
-        p0 = _prolong(coarse.p, g.shape) / 1.0
+        p0 = _prolong(coarse.p, g.shape)
         d_est = coarse.delta if delta is None else delta
     elif initial is not None:
         p0 = np.array(initial, dtype=float)

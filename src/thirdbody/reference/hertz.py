@@ -28,6 +28,8 @@ from numpy.typing import ArrayLike
 from scipy.optimize import brentq
 from scipy.special import elliprd, elliprf
 
+from .._validate import positive
+
 __all__ = [
     "HertzEllipse",
     "HertzSphere",
@@ -38,15 +40,7 @@ __all__ = [
 ]
 
 
-def _positive(name: str, value: float) -> float:
-    """Return ``value`` as a float, or raise ValueError unless it is finite and > 0."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number in (0, inf), got {value!r}") from None
-    if not (math.isfinite(x) and x > 0.0):
-        raise ValueError(f"{name} must be a finite number in (0, inf), got {value!r}")
-    return x
+_positive = positive
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .._validate import real
 from .hertz import sphere
 
 __all__ = [
@@ -48,14 +49,7 @@ __all__ = [
 _SLIDING_RTOL = 1e-12
 
 
-def _real(name: str, value: float, allowed: str, ok) -> float:
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number in {allowed}, got {value!r}") from None
-    if not (math.isfinite(x) and ok(x)):
-        raise ValueError(f"{name} must be a finite number in {allowed}, got {value!r}")
-    return x
+_real = real
 
 
 @dataclass(frozen=True)
