@@ -43,6 +43,7 @@ from __future__ import annotations
 import contextlib
 import os
 import re
+import sys
 import tempfile
 
 for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
@@ -80,6 +81,8 @@ def _capture_fd(fd: int):
     """Collect what C++ code writes to a file descriptor (Tamaas logs to stderr)."""
     out: list[str] = []
     with tempfile.TemporaryFile(mode="w+b") as tmp:
+        sys.stderr.flush()
+        sys.stdout.flush()
         saved = os.dup(fd)
         try:
             os.dup2(tmp.fileno(), fd)
