@@ -30,9 +30,11 @@ def check_coulomb(t):
     assert ((t.stick | t.slip) == t.normal.contact).all()
 
 
-@pytest.mark.parametrize("nu, n", [(0.0, 128), (0.3, 64)])
+@pytest.mark.parametrize("nu, n", [(0.0, 128), (0.3, 64), (0.3, 128), (0.5, 128)])
 @pytest.mark.parametrize("q", [0.25, 0.5, 0.75, 0.9])
 def test_cattaneo_mindlin(nu, n, q):
+    """Mindlin's solution assumes τ ∥ x; at ν > 0 the exact one has a small τ_y and a slightly
+    non-circular stick zone (Munisamy et al. 1994), inside these tolerances."""
     mat, R, normal = setup(n, nu)
     t = solve_tangential(normal, MU, force=q * MU * W)
     ref = mindlin.cattaneo_mindlin(q * MU * W, W, MU, R, mat.E, mat.nu)
@@ -47,7 +49,21 @@ def test_cattaneo_mindlin(nu, n, q):
     X, Y = normal.grid.mesh()
     tau_ref = ref.traction(np.hypot(X, Y))
     err = np.sqrt(((t.traction[0] - tau_ref) ** 2).sum() / (tau_ref**2).sum())
-    assert err < (0.05 if n >= 128 else 0.12)   # measured 0.03 at a = 16 cells, 0.10 at 8
+    # measured 0.03 at a = 16 cells, 0.10 at 8 (ν = 0); at ν > 0 up to 0.052 at a = 16 cells,
+    # part of it the approximation in Mindlin's τ ∥ x solution
+    assert err < (0.05 if nu == 0 else 0.07) if n >= 128 else err < 0.12
+
+
+@pytest.mark.parametrize("nu", [0.3, 0.5])
+def test_converges_near_full_sliding_on_a_fine_grid(nu):
+    """Q = 0.95 μP at 256² (contact 64 cells across): failed to converge before the padded
+    preconditioner and the coarse-grid start."""
+    mat, R, normal = setup(256, nu)
+    t = solve_tangential(normal, MU, force=0.95 * MU * W)
+    assert t.converged and t.residual <= 1e-8 * 10
+    check_coulomb(t)
+    ref = mindlin.cattaneo_mindlin(0.95 * MU * W, W, MU, R, mat.E, mat.nu)
+    assert t.shift[0] == pytest.approx(ref.shift, rel=0.01)
 
 
 def test_stick_radius_error_falls_with_refinement():
@@ -90,8 +106,9 @@ def test_bad_friction_coefficient(bad):
         solve_tangential(normal, bad["mu"], force=0.1)
 
 
-def test_mindlin_deresiewicz_unloading_and_loop_closure():
-    mat, R, normal = setup(96, 0.0)
+@pytest.mark.parametrize("nu", [0.0, 0.3, 0.5])
+def test_mindlin_deresiewicz_unloading_and_loop_closure(nu):
+    mat, R, normal = setup(96, nu)
     q_star = 0.8 * MU * W
     loaded = solve_tangential(normal, MU, force=q_star)
     h = normal.grid.dx

@@ -17,6 +17,14 @@ Solver: an active-set method in the spirit of Kalker's CONTACT (Vollebregt 2014)
 cells and their slip directions fixed, the stick tractions solve a linear symmetric positive
 definite problem, handled by conjugate gradients preconditioned with the inverse 2x2 kernel
 spectrum; an outer loop moves cells between stick and slip and updates slip directions.
+Slip cells keep one degree of freedom in the CG, a rotation on their disc, with the Newton
+curvature |w|/(μp); three measures keep the iteration counts low at ν > 0:
+
+* the rotation dofs are scaled by (k₀/(k₀ + |w|/(μp)))^½ around the Fourier preconditioner;
+* the preconditioner's spectrum is that of a window padded by half the contact box on each side
+  (on the bare box its low-frequency part is poor: 4x more CG iterations at ν = 0.5);
+* a coarse-to-fine cascade gives the finest grid its starting stick/slip sets and directions,
+  and while the sets still change each CG solve only reduces its residual tenfold.
 
 Sign conventions: traction is what the plate exerts on the particle (Pa); displacements are the
 particle surface's (m), parallel to the traction that causes them; the shift is the plate's.
@@ -29,7 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._citations import cites
-from .normal import ConvergenceError, NormalContact
+from .normal import ConvergenceError, NormalContact, _prolong, _restrict
 from .operator import tangential_operator
 
 _KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Contact. Kluwer; "
@@ -38,6 +46,10 @@ _KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Co
 
 
 _DEBUG = False
+_COARSEST = 16    # cells across the contact box on the coarsest level
+_SOFT = 1.0
+_ETA = 0.1
+_PRECONDITION_PAD = 0.5
 
 
 class FrictionLimitError(ValueError):
@@ -101,13 +113,13 @@ def coulomb_residual(traction: np.ndarray, slip_increment: np.ndarray, pressure:
                      mu: float, self_compliance: float) -> float:
     """Natural residual of Coulomb's law (see :class:`TangentialContact`), dimensionless."""
     trial = traction + slip_increment / self_compliance
-    norm = np.hypot(trial[0], trial[1])
+    norm = np.sqrt((trial * trial).sum(axis=0))
     limit = mu * pressure
     with np.errstate(divide="ignore", invalid="ignore"):
         factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
     diff = traction - trial * factor
     scale = mu * float(pressure.max())
-    return float(np.hypot(diff[0], diff[1]).max() / scale) if scale > 0 else 0.0
+    return float(np.sqrt((diff * diff).sum(axis=0)).max() / scale) if scale > 0 else 0.0
 
 
 def _project_on_discs(tau: np.ndarray, limit: np.ndarray) -> np.ndarray:
@@ -120,12 +132,23 @@ def _project_on_discs(tau: np.ndarray, limit: np.ndarray) -> np.ndarray:
 @cites("kalker_tangcg", _KALKER)
 def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA: float,
                 force: np.ndarray | None, shift: np.ndarray | None, tol: float,
-                scalar: bool, max_outer: int, max_inner: int):
-    """Solve one step on a window. Returns (tau, du, ds, stick, iterations, residual)."""
+                scalar: bool, max_outer: int, max_inner: int,
+                initial: np.ndarray | None = None):
+    """Solve one step on a window. Returns (tau, du, ds, stick, iterations) or None.
+
+    ``initial`` is a starting traction (e.g. from a coarser grid): its cells on the friction limit
+    start in the slip set with its directions.
+    """
     force_control = force is not None
     ncomp = 1 if scalar else 2
-    sxx, sxy, syy = K.spectra
-    T = K._t
+    ny, nx = contact.shape
+    # the preconditioner is the inverse kernel spectrum on a window padded by about half the box
+    # on each side: the restricted operator is then much better approximated at low frequencies
+    # (4x fewer CG iterations at ν = 0.5 than on the bare box, measured)
+    py, px = _precondition_pad(ny), _precondition_pad(nx)
+    Kp = tangential_operator((ny + 2 * py, nx + 2 * px), K.spacing, K.G, K.nu)
+    sxx, sxy, syy = Kp.spectra
+    T, Tp = K._t, Kp._t
     if scalar:
         inv = (1.0 / sxx,)
     else:
@@ -135,31 +158,43 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
     def apply(t: np.ndarray) -> np.ndarray:
         if scalar:
             spec = T.forward(t[0])
-            spec *= sxx
+            spec *= K.spectra[0]
             return T.inverse(spec)[None]
         return K(t)
 
     def precondition(r: np.ndarray) -> np.ndarray:
+        padded = np.zeros((ncomp, ny + 2 * py, nx + 2 * px))
+        padded[:, py:py + ny, px:px + nx] = r
         if scalar:
-            spec = T.forward(r[0])
+            spec = Tp.forward(padded[0])
             spec *= inv[0]
-            return T.inverse(spec)[None]
-        fx, fy = T.forward(r)
-        out = np.empty((2, *fx.shape), dtype=fx.dtype)
-        out[0] = inv[0] * fx + inv[1] * fy
-        out[1] = inv[1] * fx + inv[2] * fy
-        return T.inverse(out)
+            out = Tp.inverse(spec)[None]
+        else:
+            fx, fy = Tp.forward(padded)
+            spec = np.empty((2, *fx.shape), dtype=fx.dtype)
+            spec[0] = inv[0] * fx + inv[1] * fy
+            spec[1] = inv[1] * fx + inv[2] * fy
+            out = Tp.inverse(spec)
+        return out[:, py:py + ny, px:px + nx]
 
     tau0 = tau0[:ncomp]
     k0 = K.self_terms[0]
-    tau = tau0.copy()
-    slip = np.zeros_like(contact)
-    direction = np.zeros_like(tau0)
     # cells with zero friction limit (p = 0 at the contact edge) carry no traction
     zero_limit = contact & (limit <= 0)
-    stick = contact & ~zero_limit
+    if initial is None:
+        tau = tau0.copy()
+        slip = np.zeros_like(contact)
+        direction = np.zeros_like(tau0)
+    else:
+        tau = _project_on_discs(np.where(contact, initial[:ncomp], 0.0), limit)
+        norm0 = np.sqrt((tau * tau).sum(axis=0))
+        slip = contact & ~zero_limit & (norm0 >= limit * (1 - 1e-6))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            direction = np.where(slip, tau / np.where(norm0 > 0, norm0, 1.0), 0.0)
+    stick = contact & ~slip & ~zero_limit
     loose = max(tol, 1e-4)
     inner_tol = loose
+    changing = True
     iterations = 0
     ds = np.zeros(ncomp) if force_control else np.asarray(shift, dtype=float)[:ncomp]
     eye = np.eye(ncomp)
@@ -174,7 +209,7 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         else:
             # rotations stiffer than the cell's own elastic stiffness are left to the projection
             # update below (their slip direction is well defined); soft ones go into the CG
-            soft = slip & (curvature * k0 <= 1.0)
+            soft = slip & (curvature * k0 <= _SOFT)
             perp = np.stack([-direction[1], direction[0]]) * soft
         gram = stick.sum() * eye
         if not scalar:
@@ -209,9 +244,16 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
 
         if force_control:
             ds = shift_estimate(du)
+        # symmetric diagonal scaling of the rotation dofs by (k₀ / (k₀ + c))^½: the Fourier
+        # preconditioner approximates K⁻¹ but the rotations see K + c
+        S = np.sqrt(k0 / (k0 + curvature)) if not scalar else 1.0
         r = project(ds[:, None, None] - du)
-        if np.abs(r).max() > inner_tol * scale:
-            z = project(precondition(r))
+        # while the sets still change, an inexact solve (a fixed reduction of the residual) is
+        # enough to tell which cells move next
+        r_norm = float(np.abs(r).max())
+        target = max(inner_tol * scale, _ETA * r_norm if changing else 0.0)
+        if r_norm > target:
+            z = project(S * precondition(S * r))
             t = z
             rz = float(np.vdot(r, z))
             for _inner in range(max_inner):
@@ -225,9 +267,9 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
                 du += alpha * v
                 r -= alpha * vs
                 iterations += 1
-                if np.abs(r).max() <= inner_tol * scale:
+                if np.abs(r).max() <= target:
                     break
-                z = project(precondition(r))
+                z = project(S * precondition(S * r))
                 rz_new = float(np.vdot(r, z))
                 t = z + (rz_new / rz) * t
                 rz = rz_new
@@ -257,17 +299,65 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
             print("outer", _outer, "stick", int(stick.sum()), "slip", int(slip.sum()),
                   "to_slip", int(to_slip.sum()), "to_stick", int(to_stick.sum()),
                   "turned", turned, "its", iterations)
-        if not to_slip.any() and not to_stick.any() and turned <= inner_tol:
+        changing = bool(to_slip.any() or to_stick.any())
+        if not changing and turned <= inner_tol:
             if inner_tol <= tol:
-                tau = np.where(slip, limit * unit, tau)
-                return tau, du, ds, stick, iterations
-            inner_tol = tol
+                tau_f = np.where(slip, limit * unit, tau)
+                du_f = apply(tau_f - tau0)
+                if force_control:
+                    ds = shift_estimate(du_f)
+                w_f = np.where(stick | ~contact, 0.0, ds[:, None, None] - du_f)
+                res = coulomb_residual(np.where(contact, tau_f, 0.0), w_f, limit, 1.0, k0)
+                if res <= tol or inner_tol < tol * 1e-3:
+                    return tau_f, du_f, ds, stick, iterations
+                inner_tol /= 10     # the stopping test was met but not Coulomb's law: tighten
+            else:
+                inner_tol = tol
         direction = np.where(to_slip | keep, unit, direction)
         with np.errstate(divide="ignore", invalid="ignore"):
             curvature = np.where(keep, np.sqrt((w * w).sum(axis=0)) / limit, 0.0)
         slip = (slip & ~to_stick) | to_slip
         stick = contact & ~slip & ~zero_limit
     return None
+
+def _precondition_pad(n: int) -> int:
+    """Padding (cells per side) of the preconditioner's window for a box of n cells."""
+    return int(_PRECONDITION_PAD * n + 0.5)
+
+
+def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.ndarray,
+                  limit: np.ndarray, contact: np.ndarray, force: np.ndarray | None,
+                  shift: np.ndarray | None, tol: float, scalar: bool, max_outer: int,
+                  max_inner: int):
+    """Coarse-to-fine cascade: the step is first solved (loosely) on a grid twice as coarse, whose
+    traction gives this level its starting stick/slip sets and slip directions. Most of the
+    active-set updates then happen where they are cheap."""
+    dx, dy = spacing
+    shape = contact.shape
+    initial = None
+    if min(shape) >= 2 * _COARSEST:
+        c_limit = _restrict(limit)
+        c_contact = (_restrict(contact.astype(float)) > 0) & (c_limit > 0)
+        c_tau0 = np.stack([_restrict(t) for t in tau0])
+        coarse = _solve_levels((2 * dx, 2 * dy), G, nu, c_tau0, c_limit, c_contact, force,
+                               shift, max(tol, 1e-4), scalar, max_outer, max_inner)
+        if coarse is not None:
+            # fine cells under a coarse slip cell start slipping in its direction, on their own
+            # (finer) friction limit; the others take the coarse traction
+            c_tau = coarse[0]
+            c_norm = np.sqrt((c_tau * c_tau).sum(axis=0))
+            c_slip = c_contact & (c_norm >= c_limit * (1 - 1e-6))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                c_dir = np.where(c_slip, c_tau / np.where(c_norm > 0, c_norm, 1.0), 0.0)
+            slip = _prolong(c_slip.astype(float), shape) > 0.5
+            initial = np.zeros((2, *shape))
+            for k in range(c_tau.shape[0]):
+                initial[k] = np.where(slip, limit * _prolong(c_dir[k], shape),
+                                      _prolong(c_tau[k], shape))
+    K = tangential_operator(shape, spacing, G, nu)
+    return _active_set(K, tau0, limit, contact, dx * dy, force, shift, tol, scalar, max_outer,
+                       max_inner, initial)
+
 
 def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None,
                      previous: TangentialContact | None = None, tol: float = 1e-8,
@@ -308,7 +398,6 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     if (force is None) == (shift is None):
         raise ValueError("give exactly one of force (N) and shift (m)")
     grid, mat = normal.grid, normal.material
-    dA = grid.cell_area
 
     def vec(v, name):
         a = np.zeros(2)
@@ -357,10 +446,8 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     if rows.size == 0:
         raise ValueError("the normal solution has no contact")
     box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
-    Kb = tangential_operator((rows[-1] + 1 - rows[0], cols[-1] + 1 - cols[0]), grid.spacing,
-                             mat.G, mat.nu)
-    out = _active_set(Kb, tau0[(slice(None), *box)], limit[box], contact[box], dA,
-                      Q, ds_prescribed, tol, scalar, max_outer, max_iter)
+    out = _solve_levels(grid.spacing, mat.G, mat.nu, tau0[(slice(None), *box)], limit[box],
+                        contact[box], Q, ds_prescribed, tol, scalar, max_outer, max_iter)
     if out is None:
         raise ConvergenceError(
             "tangential solver did not converge (stick/slip set or slip directions kept "
