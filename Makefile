@@ -1,11 +1,12 @@
 # Quick start:  `make demo`  (sets up .venv, runs the main example, writes its plots)
+#               `make fig2`  (the paper's Fig. 2: partial slip of a tilted ellipsoid, out/fig2)
 #               `make test`  (sets up .venv, runs ruff and the whole test suite)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo test test-fast lint bench clean venv
+.PHONY: demo fig2 test test-fast lint bench clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +27,9 @@ venv: $(VENV)/.installed-test
 
 demo: $(VENV)/.installed-test
 	$(BIN)/python examples/hertz_demo.py --out $(OUT)
+
+fig2: $(VENV)/.installed-test
+	$(BIN)/python examples/fig2_partial_slip.py --out $(OUT)/fig2
 
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples

@@ -66,6 +66,18 @@ def test_converges_near_full_sliding_on_a_fine_grid(nu):
     assert t.shift[0] == pytest.approx(ref.shift, rel=0.01)
 
 
+@pytest.mark.parametrize("nu", [0.3, 0.5])
+def test_converges_at_the_verge_of_sliding(nu):
+    """Q = 0.9999 μP: the stick zone is a cell or none (with ν > 0 the slip directions fan out
+    and every cell may slip while |Q| < μP); the force must still be met exactly."""
+    _, _, normal = setup(128, nu)
+    t = solve_tangential(normal, MU, force=0.9999 * MU * W)
+    check_coulomb(t)
+    assert t.force[0] == pytest.approx(0.9999 * MU * W, rel=1e-8)
+    assert abs(t.force[1]) < 1e-8 * W
+    assert t.residual <= 1e-7
+
+
 def test_stick_radius_error_falls_with_refinement():
     errs = []
     for n in (32, 64, 128):

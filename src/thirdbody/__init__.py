@@ -8,9 +8,12 @@ Public API::
     solve_tangential(normal, mu, force=... | shift=..., previous=...) -> TangentialContact
     reference.hertz, reference.mindlin  analytic solutions to check runs against
     citations()                         the papers behind the methods used
+    Particle(shape, material, orientation_deg), Plates(mu_up, mu_low)
+    Simulation(particle, plates, LinearRamp(stop=F, steps=n)).run() -> xarray.Dataset
 """
 
 from ._citations import citations
+from ._version import __version__
 from .bem import (
     ContactAtEdgeError,
     ConvergenceError,
@@ -22,17 +25,26 @@ from .bem import (
     solve_normal,
     solve_tangential,
 )
+from .loading import ForceTable, GapRamp, HoldThenRamp, LinearRamp
 from .material import Material
-
-__version__ = "0.1.0"
+from .particle import Particle, Plates
+from .simulation import Simulation, SimulationError
 
 __all__ = [
     "ContactAtEdgeError",
     "ConvergenceError",
+    "ForceTable",
     "FrictionLimitError",
+    "GapRamp",
     "Grid",
+    "HoldThenRamp",
+    "LinearRamp",
     "Material",
     "NormalContact",
+    "Particle",
+    "Plates",
+    "Simulation",
+    "SimulationError",
     "TangentialContact",
     "__version__",
     "citations",

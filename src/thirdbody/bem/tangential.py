@@ -32,9 +32,10 @@ particle surface's (m), parallel to the traction that causes them; the shift is 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 from .._citations import cites
 from .normal import ConvergenceError, NormalContact, _prolong, _restrict
@@ -145,8 +146,9 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
     # the preconditioner is the inverse kernel spectrum on a window padded by about half the box
     # on each side: the restricted operator is then much better approximated at low frequencies
     # (4x fewer CG iterations at ν = 0.5 than on the bare box, measured)
-    py, px = _precondition_pad(ny), _precondition_pad(nx)
-    Kp = tangential_operator((ny + 2 * py, nx + 2 * px), K.spacing, K.G, K.nu)
+    my, mx = _precondition_size(ny), _precondition_size(nx)
+    py, px = (my - ny) // 2, (mx - nx) // 2
+    Kp = tangential_operator((my, mx), K.spacing, K.G, K.nu)
     sxx, sxy, syy = Kp.spectra
     T, Tp = K._t, Kp._t
     if scalar:
@@ -163,7 +165,7 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         return K(t)
 
     def precondition(r: np.ndarray) -> np.ndarray:
-        padded = np.zeros((ncomp, ny + 2 * py, nx + 2 * px))
+        padded = np.zeros((ncomp, my, mx))
         padded[:, py:py + ny, px:px + nx] = r
         if scalar:
             spec = Tp.forward(padded[0])
@@ -281,7 +283,10 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         norm_tau = np.sqrt((tau * tau).sum(axis=0))
         to_slip = stick & (norm_tau > limit)
         along = (w * direction).sum(axis=0)
-        to_stick = slip & (along < 0)
+        # a slip cell sticks again when its trial traction τ + w/k₀ falls inside its disc (the
+        # semismooth-Newton active set; `along < 0` alone reacts to every sign flip of a small w)
+        trial_in = ((tau + w / k0) ** 2).sum(axis=0) < limit**2
+        to_stick = slip & (along < 0) & trial_in
         keep = slip & ~to_stick
         # slip tractions rotated in the tangent plane go back on the circle; stiff ones follow
         # the projection of the trial traction τ + w/k₀
@@ -320,22 +325,31 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         stick = contact & ~slip & ~zero_limit
     return None
 
-def _precondition_pad(n: int) -> int:
-    """Padding (cells per side) of the preconditioner's window for a box of n cells."""
-    return int(_PRECONDITION_PAD * n + 0.5)
+def _fast_span(a: int, b: int, n: int) -> slice:
+    """Widen [a, b) inside [0, n) to a length whose FFTs are fast (5-smooth), if it fits."""
+    size = next_fast_len(b - a, real=True)
+    if size > n:
+        return slice(a, b)
+    lo = max(0, min(a - (size - (b - a)) // 2, n - size))
+    return slice(lo, lo + size)
+
+
+def _precondition_size(n: int) -> int:
+    """Cells across the preconditioner's window for a box of n cells: padded by about
+    ``_PRECONDITION_PAD`` n per side, rounded up to a 5-smooth length (fast FFTs)."""
+    return next_fast_len(n + 2 * int(_PRECONDITION_PAD * n + 0.5), real=True)
 
 
 def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.ndarray,
                   limit: np.ndarray, contact: np.ndarray, force: np.ndarray | None,
                   shift: np.ndarray | None, tol: float, scalar: bool, max_outer: int,
-                  max_inner: int):
+                  max_inner: int, initial: np.ndarray | None = None):
     """Coarse-to-fine cascade: the step is first solved (loosely) on a grid twice as coarse, whose
     traction gives this level its starting stick/slip sets and slip directions. Most of the
     active-set updates then happen where they are cheap."""
     dx, dy = spacing
     shape = contact.shape
-    initial = None
-    if min(shape) >= 2 * _COARSEST:
+    if initial is None and min(shape) >= 2 * _COARSEST:
         c_limit = _restrict(limit)
         c_contact = (_restrict(contact.astype(float)) > 0) & (c_limit > 0)
         c_tau0 = np.stack([_restrict(t) for t in tau0])
@@ -362,7 +376,8 @@ def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.nd
 def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None,
                      previous: TangentialContact | None = None, tol: float = 1e-8,
                      scalar: bool = False, max_outer: int = 60,
-                     max_iter: int = 500) -> TangentialContact:
+                     max_iter: int = 500, _initial: np.ndarray | None = None,
+                     ) -> TangentialContact:
     """Solve one incremental partial-slip step on top of a normal contact solution.
 
     Parameters
@@ -445,22 +460,130 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     cols = np.flatnonzero(contact.any(axis=0))
     if rows.size == 0:
         raise ValueError("the normal solution has no contact")
-    box = (slice(rows[0], rows[-1] + 1), slice(cols[0], cols[-1] + 1))
+    box = (_fast_span(rows[0], rows[-1] + 1, grid.ny), _fast_span(cols[0], cols[-1] + 1, grid.nx))
     out = _solve_levels(grid.spacing, mat.G, mat.nu, tau0[(slice(None), *box)], limit[box],
-                        contact[box], Q, ds_prescribed, tol, scalar, max_outer, max_iter)
-    if out is None:
-        raise ConvergenceError(
-            "tangential solver did not converge (stick/slip set or slip directions kept "
-            "changing); try a smaller load increment")
-    tau_b, _, ds, _, iterations = out
-    ncomp = tau_b.shape[0]
-    tau = np.zeros((2, *grid.shape))
-    tau[(slice(ncomp), *box)] = tau_b
-    dsv = np.zeros(2)
-    dsv[:ncomp] = ds
-    if ds_prescribed is not None:
-        dsv = ds_prescribed
-    return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol)
+                        contact[box], Q, ds_prescribed, tol, scalar, max_outer, max_iter,
+                        None if _initial is None else _initial[(slice(None), *box)])
+    failure = ("tangential solver did not converge (stick/slip set or slip directions kept "
+               "changing); try a smaller load increment")
+    if out is not None:
+        tau_b, _, ds, _, iterations = out
+        ncomp = tau_b.shape[0]
+        tau = np.zeros((2, *grid.shape))
+        tau[(slice(ncomp), *box)] = tau_b
+        dsv = np.zeros(2)
+        dsv[:ncomp] = ds
+        if ds_prescribed is not None:
+            dsv = ds_prescribed
+        try:
+            return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol)
+        except ConvergenceError as exc:
+            failure = str(exc)
+    if Q is None:
+        raise ConvergenceError(failure)
+    # force control failed: typically close to full sliding, where the stick zone is a few
+    # cells or none (with ν > 0 the slip directions fan out, so every cell can slip while
+    # |Q| < μF_N); find the shift that transmits Q with displacement-controlled solves
+    return _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
+                           max_iter, failure)
+
+
+def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer, max_iter,
+                    failure):
+    """Force control by root finding on the shift increment: along e = Q/|Q| the transmitted
+    force F(s e)·e increases monotonically with s (F is the gradient of a convex function of
+    the shift), so it is bracketed and solved by the Illinois method; the perpendicular
+    component is corrected by a secant step when the contact is not symmetric."""
+    q = float(np.hypot(*Q))
+    e = Q / q
+    e_perp = np.array([-e[1], e[0]])
+    iterations = 0
+    warm: list[np.ndarray | None] = [None]
+
+    def solve(s: float, s_perp: float) -> TangentialContact:
+        nonlocal iterations
+        shift = prev_shift + s * e + s_perp * e_perp
+        try:
+            t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
+                                 scalar=scalar, max_outer=max_outer, max_iter=max_iter,
+                                 _initial=warm[0])
+        except ConvergenceError:
+            if warm[0] is None:
+                raise
+            t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
+                                 scalar=scalar, max_outer=max_outer, max_iter=max_iter)
+        warm[0] = t.traction
+        iterations += t.iterations
+        return t
+
+    def along(t: TangentialContact) -> float:
+        return float(t.force @ e) - q
+
+    # scale: the shift of full sliding along e (all cells slip once the plate has moved past
+    # the furthest surface point)
+    K = tangential_operator(normal.grid.shape, normal.grid.spacing, normal.material.G,
+                            normal.material.nu)
+    tau_full = mu * normal.pressure * e[:, None, None]
+    tau_full[:, ~normal.contact] = 0.0
+    tau0 = np.zeros_like(tau_full)
+    if previous is not None:
+        tau0 = _project_on_discs(np.where(normal.contact, previous.traction, 0.0),
+                                 mu * normal.pressure)
+    du = K(tau_full - tau0)
+    s_hi = max(float((du * e[:, None, None]).sum(axis=0)[normal.contact].max()), 1e-300)
+    s_perp = 0.0
+    lo = 0.0
+    hi, t_hi = s_hi, solve(s_hi, s_perp)
+    f_hi = along(t_hi)
+    for _ in range(60):
+        if f_hi >= 0:
+            break
+        lo, f_lo = hi, f_hi
+        hi *= 2.0
+        t_hi = solve(hi, s_perp)
+        f_hi = along(t_hi)
+    else:
+        raise ConvergenceError(f"{failure}; no shift transmits the force")
+    ftol = max(tol, 1e-12) * q
+    f_lo = -q + float(_force_of(tau0, normal) @ e) if lo == 0.0 else f_lo
+    for _ in range(3):                      # perpendicular corrections
+        best, side = t_hi, 0
+        for _ in range(100):                # regula falsi, Illinois-modified
+            if abs(along(best)) <= ftol:
+                break
+            s = hi - f_hi * (hi - lo) / (f_hi - f_lo)
+            best = solve(s, s_perp)
+            f = along(best)
+            if f > 0:
+                hi, f_hi = s, f
+                if side == 1:
+                    f_lo /= 2
+                side = 1
+            else:
+                lo, f_lo = s, f
+                if side == -1:
+                    f_hi /= 2
+                side = -1
+        else:
+            break
+        perp = float(best.force @ e_perp)
+        if scalar or abs(perp) <= ftol:
+            return replace(best, iterations=iterations)
+        s_best = float((best.shift - prev_shift) @ e)
+        probe = solve(s_best, s_perp + 1e-3 * s_best)
+        slope = (float(probe.force @ e_perp) - perp) / (1e-3 * s_best)
+        if slope == 0:
+            break
+        s_perp -= perp / slope
+        lo, hi = 0.0, 2 * s_best
+        f_lo = -q
+        t_hi = solve(hi, s_perp)
+        f_hi = along(t_hi)
+    raise ConvergenceError(f"{failure}; the shift search did not converge either")
+
+
+def _force_of(traction: np.ndarray, normal: NormalContact) -> np.ndarray:
+    return traction.reshape(2, -1).sum(axis=1) * normal.grid.cell_area
 
 
 def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False):

@@ -1,0 +1,49 @@
+"""The example scripts run end to end at a small size and produce sane output."""
+
+import importlib.util
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def load_example(name):
+    spec = importlib.util.spec_from_file_location(name, EXAMPLES / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses resolve annotations through sys.modules
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_fig2_example_runs(tmp_path):
+    pytest.importorskip("matplotlib")
+    fig2 = load_example("fig2_partial_slip")
+    run = fig2.main(["--out", str(tmp_path), "--n", "48", "--steps", "3",
+                     "--dpi", "60"])
+
+    for name in ["fig2.png", "fig2_stick_slip.png", "fig2_tau_x.png", "fig2_force_shift.png"]:
+        path = tmp_path / name
+        assert path.is_file() and path.stat().st_size > 5_000, name
+        assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    summary = (tmp_path / "summary.txt").read_text()
+    assert "F_N" in summary and "Pa" in summary
+    # one table row per step: step, shift, F_x, F_x/muF_N, stick fraction, ...
+    rows = [line.split() for line in summary.splitlines()
+            if line.split() and line.split()[0] in {"1", "2", "3"}]
+    assert len(rows) == 3
+    shift, fx, ratio, stick = (np.array([float(r[i]) for r in rows]) for i in (1, 2, 3, 4))
+    assert (np.diff(shift) > 0).all() and (np.diff(fx) > 0).all()
+    assert (np.diff(stick) < 0).all() and 0 < stick[-1] < 0.6
+    assert ratio[-1] == pytest.approx(0.8, abs=0.02)  # the default target F_x = 0.8 mu F_N
+
+    assert len(run.steps) == 3
+    contact_cells_x = run.normal.contact.any(axis=0).sum()
+    assert contact_cells_x >= 30
+    p = run.normal.pressure
+    for step in run.steps:
+        assert step.converged and step.residual < 1e-6
+        assert (np.hypot(*step.traction) <= run.mu * p * (1 + 1e-9) + 1e-300).all()
+        assert step.stick.any() and step.slip.any()
