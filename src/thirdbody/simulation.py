@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from ._version import __version__
-from .bem import ConvergenceError, TangentialContact
+from .bem import ContactAtEdgeError, ConvergenceError, TangentialContact
 from .loading import LoadProgram, LoadStep
 from .particle.interface import Interface, InterfaceNormal, Window, remap
 from .particle.model import Particle, Plates
@@ -421,7 +421,10 @@ class Simulation:
         Raises :class:`SimulationError` when a step cannot be completed.
         """
         if self.map_cells is None and self.maps_every:
-            self.map_cells = self._estimate_map_cells()
+            try:
+                self.map_cells = self._estimate_map_cells()
+            except (ConvergenceError, ContactAtEdgeError, SimulationError):
+                self.map_cells = 64         # the step that cannot be solved will say why
         state = state or _State(theta=self.particle.orientation)
         n_steps = len(self.schedule)
         for k in range(start, n_steps):
@@ -440,7 +443,7 @@ class Simulation:
                     self._integrate(path, final, state)
                     state.history.clear()
                 tangential = self._tangential(final, state)
-            except (ConvergenceError, SimulationError) as exc:
+            except (ConvergenceError, ContactAtEdgeError, SimulationError) as exc:
                 raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): {exc}") from exc
             rotation = math.degrees(final.theta - state.theta)
             state.theta = final.theta

@@ -167,6 +167,12 @@ class Interface:
         return self.last
 
     def _grow(self, window: Window) -> Window:
+        footprint = 2 * self.shape.size / self.spacing      # the particle's width, cells
+        if window.nx >= footprint:
+            raise ContactAtEdgeError(
+                f"{self.side} interface: the contact spreads over the whole particle "
+                f"(window {window.nx} cells of {self.spacing:.3g} m): the load is far beyond "
+                "the half-space model's range (contact size << particle size)")
         if window.nx * 2 > _MAX_CELLS:
             raise ContactAtEdgeError(
                 f"{self.side} interface: the contact does not fit in a {window.nx}-cell window "
