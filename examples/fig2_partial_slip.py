@@ -164,6 +164,7 @@ def summary_text(r: Fig2Run) -> str:
     muFN = r.mu * r.normal_force
     cx, cy = r.normal.centroid
     x0 = r.first_contact[0]
+    xs, ys = g.x[r.normal.contact.any(axis=0)], np.abs(g.y[r.normal.contact.any(axis=1)])
     lines = [
         "Fig. 2 example: partial slip of a tilted elastic ellipsoid on a rigid plate",
         "",
@@ -185,6 +186,8 @@ def summary_text(r: Fig2Run) -> str:
         f"  contact area            {r.normal.area * 1e6:.5g} mm^2 "
         f"(Hertz {np.pi * r.hertz.semi_axis_x * r.hertz.semi_axis_y * 1e6:.5g} mm^2)",
         f"  peak pressure           {r.normal.pressure.max() * MPA:.5g} MPa",
+        f"  contact extent          x - x0 from {(xs.min() - x0) * UM:.4g} to "
+        f"{(xs.max() - x0) * UM:.4g} um, y within +-{ys.max() * UM:.4g} um (cell centres)",
         f"  pressure centroid       x - x0 = {(cx - x0) * UM:.4g} um, y = {cy * UM:.3g} um",
         f"  approach                {r.normal.approach * UM:.5g} um",
         f"  iterations, residual    {r.normal.iterations}, {r.normal.residual:.1e}",
