@@ -44,5 +44,8 @@ lint: $(VENV)/.installed-test
 bench: $(VENV)/.installed-bench
 	$(BIN)/python benchmarks/normal_hertz.py
 
+bench-tangential: $(VENV)/.installed-bench
+	$(BIN)/python benchmarks/tangential_cattaneo.py --md benchmarks/results/tangential_cattaneo.md
+
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache

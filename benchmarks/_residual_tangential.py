@@ -374,14 +374,26 @@ def _self_test() -> None:
                   f"{re['force_error']:8.1e}")
             assert rr["residual"] < 1e-6 and re["residual"] < 1e-6, (rr, re)
             assert rr["residual"] < 1e-3 * res["residual"]
-    # the residual sees a wrong solution: the sampled traction with tau_y flipped in sign on
-    # half of the window, and a traction that is 1 % off in the stick zone
+    # the residual sees a wrong solution: a converged traction perturbed by 1e-6 mu p0 in one
+    # stick cell, and the same traction rotated by 1e-3 rad in every slip cell
     tau, p, mu, h, G, cm = _cattaneo_case(128, 0.5)
-    bad = tau.copy()
-    bad[0] *= 1.01
-    r_bad = coulomb_residual(bad, p, mu, h, G, 0.5)
-    assert r_bad["residual"] > 1e-3, r_bad
-    print("a traction 1 % off: residual", f"{r_bad['residual']:.2e}", "(caught)")
+    grid = thirdbody.Grid(128, h)
+    mat = thirdbody.Material(2 * G * 1.5, 0.5)
+    normal = thirdbody.solve_normal(grid.paraboloid(4 * mat.E_star * (1e-3 / 8) ** 3 / 3.0),
+                                    grid, mat, force=1.0)
+    t = thirdbody.solve_tangential(normal, mu, force=(cm.tangential_force, 0.0), tol=1e-10)
+    good = coulomb_residual(t.traction, normal.pressure, mu, h, G, 0.5)["residual"]
+    bad = t.traction.copy()
+    bad[0, 64, 64] += 1e-6 * mu * cm.peak_pressure
+    kicked = coulomb_residual(bad, normal.pressure, mu, h, G, 0.5)["residual"]
+    c, s = np.cos(1e-3), np.sin(1e-3)
+    turned = t.traction.copy()
+    turned[0] = np.where(t.slip, c * t.traction[0] - s * t.traction[1], t.traction[0])
+    turned[1] = np.where(t.slip, s * t.traction[0] + c * t.traction[1], t.traction[1])
+    rotated = coulomb_residual(turned, normal.pressure, mu, h, G, 0.5)["residual"]
+    print(f"converged {good:.1e}; one stick cell off by 1e-6 mu p0: {kicked:.1e}; "
+          f"slip directions turned by 1e-3: {rotated:.1e}")
+    assert good < 1e-9 and kicked > 1e-7 and rotated > 1e-4, (good, kicked, rotated)
 
 
 if __name__ == "__main__":

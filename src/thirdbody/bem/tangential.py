@@ -237,7 +237,9 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
             mismatch = force[:ncomp] / dA - tau.reshape(ncomp, -1).sum(axis=1)
             tau[:, stick] += (mismatch / stick.sum())[:, None]
         du = apply(tau - tau0)
-        scale = max(float(np.abs(du).max()), float(np.abs(ds).max()), 1e-300)
+        # the CG stops on the displacement residual in the Coulomb residual's own units
+        # (k₀ μ max p): a stick cell's error w/k₀ is then below tol·μ max p
+        scale = max(k0 * float(limit.max()), 1e-300)
 
         def shift_estimate(du: np.ndarray, gram=gram, project=project) -> np.ndarray:
             # the multiplier of the force constraint: Σ P_i (ds - du_i) = 0
@@ -311,7 +313,7 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
                 du_f = apply(tau_f - tau0)
                 if force_control:
                     ds = shift_estimate(du_f)
-                w_f = np.where(stick | ~contact, 0.0, ds[:, None, None] - du_f)
+                w_f = np.where(contact & ~zero_limit, ds[:, None, None] - du_f, 0.0)
                 res = coulomb_residual(np.where(contact, tau_f, 0.0), w_f, limit, 1.0, k0)
                 if res <= tol or inner_tol < tol * 1e-3:
                     return tau_f, du_f, ds, stick, iterations
@@ -596,7 +598,7 @@ def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=
     norm_tau = np.hypot(tau[0], tau[1])
     slip = contact & (norm_tau >= limit * (1 - 1e-9))
     stick = contact & ~slip
-    w[:, stick] = 0.0
+    w[:, contact & (limit <= 0)] = 0.0
     residual = coulomb_residual(np.where(contact, tau, 0.0), w, normal.pressure, mu, k0)
     if not residual <= max(tol, 1e-14) * 10:
         raise ConvergenceError(f"tangential solver: Coulomb residual {residual:.3e} above "

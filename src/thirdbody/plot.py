@@ -1,0 +1,157 @@
+"""Figures from a results dataset (matplotlib, Agg): the state curve, the orientation and
+position history, and contact maps. Every function takes the :class:`xarray.Dataset` written by
+:meth:`thirdbody.Simulation.run` and returns the figure; :func:`save_all` writes them as PNG
+(and PDF) files.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["contact_maps", "orientation_history", "save_all", "state_curve"]
+
+_STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _inputs(ds) -> dict:
+    return json.loads(ds.attrs.get("inputs", "{}"))
+
+
+def _title(ds) -> str:
+    i = {k: v for k, v in _inputs(ds).items() if v is not None}
+    nan = float("nan")
+    up, low = i.get("mu_up", nan), i.get("mu_low", nan)
+    mu = f"μ = {up:g}" if up == low else f"μ_up = {up:g}, μ_low = {low:g}"
+    return (f"E = {i.get('E', nan) / 1e9:g} GPa, ν = {i.get('nu', nan):g}, {mu}, "
+            f"θ₀ = {i.get('orientation_deg', nan):g}°")
+
+
+def state_curve(ds, labels: dict[int, str] | None = None):
+    """F_T/(μF_N) against the compression ratio (d₀ − h)/d₀ (the paper's Figs. 3a, 4, 5a).
+
+    The stick region (ratio < 1) is shaded, the slip line at 1 drawn; with unequal μ there is
+    one curve per interface. Steps in which the particle turned are marked. ``labels`` maps
+    step indices to letters written next to the curve.
+    """
+    plt = _plt()
+    i = _inputs(ds)
+    c = ds.compression.values
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    top = max(1.2, float(np.nanmax(np.abs(ds.ratio_low.values))) * 1.1)
+    ax.axhspan(-top, 1.0, color="0.88", zorder=0, label="stick (partial slip)")
+    ax.axhline(1.0, color="tab:red", lw=1.5, label="slip: F_T = μF_N")
+    # the sign tells on which side the lower plate pushes
+    sign = np.sign(ds.tangential_force_x.values)
+    equal = i.get("mu_up") == i.get("mu_low")
+    curves = [("low", "F_T/(μF_N)" if equal else "lower: F_T/(μ_low F_N)", "tab:blue", "o")]
+    if not equal:
+        curves = [("up", "upper: F_T/(μ_up F_N)", "tab:blue", "*"),
+                  ("low", "lower: F_T/(μ_low F_N)", "tab:red", "^")]
+    for side, label, colour, marker in curves:
+        r = ds[f"ratio_{side}"].values * np.where(sign == 0, 1.0, sign) * (sign[0] or 1)
+        ax.plot(c, r, marker=marker, ms=4, color=colour, lw=1.2, label=label)
+    turned = ds.turned.values.astype(bool)
+    if turned.any():
+        ax.plot(c[turned], np.ones(turned.sum()), "x", color="k", ms=6, label="turned")
+    for step, text in (labels or {}).items():
+        k = int(np.flatnonzero(ds.step.values == step)[0])
+        ax.annotate(text, (c[k], ds.ratio_low.values[k]), textcoords="offset points",
+                    xytext=(4, 6), fontsize=11, fontweight="bold")
+    ax.set_xlabel("compression (d₀ − h)/d₀")
+    ax.set_ylabel("F_T / (μ F_N)")
+    ax.set_ylim(min(-0.2, float(np.nanmin(ax.get_ylim()))), top)
+    ax.set_xlim(0, float(c.max()) * 1.02 if c.size else 1)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title(_title(ds), fontsize=9)
+    return fig
+
+
+def orientation_history(ds):
+    """Orientation θ (degrees) and the centroid's horizontal position (µm) against the
+    compression ratio."""
+    plt = _plt()
+    c = ds.compression.values
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 5.0), sharex=True, constrained_layout=True)
+    a1.plot(c, ds.orientation.values, "o-", ms=3)
+    a1.set_ylabel("orientation θ (°)")
+    a2.plot(c, ds.position_x.values * 1e6, "o-", ms=3, color="tab:green", label="centroid x")
+    a2.plot(c, ds.slip_up.values * 1e6, "--", color="tab:blue", label="slip, upper")
+    a2.plot(c, ds.slip_low.values * 1e6, ":", color="tab:red", label="slip, lower")
+    a2.set_ylabel("displacement (µm)")
+    a2.set_xlabel("compression (d₀ − h)/d₀")
+    a2.legend(fontsize=8)
+    a1.set_title(_title(ds), fontsize=9)
+    return fig
+
+
+def contact_maps(ds, steps: list[int] | None = None):
+    """Pressure and stick/slip/open maps of both interfaces at the chosen steps (default: the
+    first, the middle and the last stored map), side by side, axes in µm."""
+    plt = _plt()
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    stored = list(ds.map_step.values)
+    if steps is None:
+        steps = sorted({stored[0], stored[len(stored) // 2], stored[-1]})
+    steps = [s for s in steps if s in stored]
+    x = ds.map_x.values * 1e6
+    y = ds.map_y.values * 1e6
+    extent = (x[0], x[-1], y[0], y[-1])
+    fig, axes = plt.subplots(len(steps), 4, figsize=(12, 3.0 * len(steps) + 0.6),
+                             squeeze=False, constrained_layout=True)
+    status_map = ListedColormap(_STATUS_COLOURS)
+    pmax = max(float(ds.pressure_up.max()), float(ds.pressure_low.max())) / 1e6
+    for row, step in enumerate(steps):
+        k = stored.index(step)
+        c = float(ds.compression.sel(step=step))
+        for col, (side, where) in enumerate((("up", "upper"), ("low", "lower"))):
+            ax_p, ax_s = axes[row, 2 * col], axes[row, 2 * col + 1]
+            im = ax_p.imshow(ds[f"pressure_{side}"].values[k] / 1e6, origin="lower",
+                             extent=extent, cmap="viridis", vmin=0, vmax=pmax)
+            ax_s.imshow(ds[f"status_{side}"].values[k], origin="lower", extent=extent,
+                        cmap=status_map, vmin=-0.5, vmax=2.5, interpolation="nearest")
+            ax_p.set_title(f"step {step}, {where}: pressure (c = {c:.3f})", fontsize=9)
+            ax_s.set_title(f"step {step}, {where}: stick / slip", fontsize=9)
+            for ax in (ax_p, ax_s):
+                ax.set_xlabel("x (µm)")
+                ax.set_ylabel("y (µm)")
+            if col == 1:
+                fig.colorbar(im, ax=ax_p, label="p (MPa)", shrink=0.8)
+    handles = [Patch(facecolor=col, edgecolor="k", label=name)
+               for col, name in zip(_STATUS_COLOURS, ("open", "stick", "slip"), strict=True)]
+    fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8)
+    fig.suptitle(_title(ds), fontsize=10)
+    return fig
+
+
+def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
+             labels: dict[int, str] | None = None, map_steps: list[int] | None = None,
+             ) -> list[Path]:
+    """Write every figure for ``ds`` into ``out`` (created); returns the files written."""
+    plt = _plt()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    figures = {"state": state_curve(ds, labels), "orientation": orientation_history(ds)}
+    if "map_step" in ds.dims and ds.sizes["map_step"]:
+        figures["contact_maps"] = contact_maps(ds, map_steps)
+    written = []
+    for name, fig in figures.items():
+        for fmt in formats:
+            path = out / f"{name}.{fmt}"
+            fig.savefig(path, dpi=130)
+            written.append(path)
+        plt.close(fig)
+    return written
