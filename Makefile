@@ -1,12 +1,13 @@
-# Quick start:  `make demo`  (sets up .venv, runs the main example, writes its plots)
-#               `make fig2`  (the paper's Fig. 2: partial slip of a tilted ellipsoid, out/fig2)
+# Quick start:  `make demo`  (sets up .venv, runs the paper's Fig. 3 particle simulation, plots in out/fig3)
 #               `make test`  (sets up .venv, runs ruff and the whole test suite)
+# More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
+#               `make bench`, `make bench-tangential`, `make bench-simulation`
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo fig2 test test-fast lint bench clean venv
+.PHONY: demo hertz fig2 fig3 fig4 fig5 test test-fast lint bench bench-tangential bench-simulation clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -25,8 +26,13 @@ $(VENV)/.installed-bench: pyproject.toml | $(BIN)/activate
 
 venv: $(VENV)/.installed-test
 
-demo: $(VENV)/.installed-test
+demo: fig3
+
+hertz: $(VENV)/.installed-test
 	$(BIN)/python examples/hertz_demo.py --out $(OUT)
+
+fig3 fig4 fig5: $(VENV)/.installed-test
+	$(BIN)/python examples/paper_figures.py --figure $(subst fig,,$@) --out $(OUT)/$@
 
 fig2: $(VENV)/.installed-test
 	$(BIN)/python examples/fig2_partial_slip.py --out $(OUT)/fig2
@@ -46,6 +52,9 @@ bench: $(VENV)/.installed-bench
 
 bench-tangential: $(VENV)/.installed-bench
 	$(BIN)/python benchmarks/tangential_cattaneo.py --md benchmarks/results/tangential_cattaneo.md
+
+bench-simulation: $(VENV)/.installed-test
+	$(BIN)/python benchmarks/simulation_fig3.py
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache

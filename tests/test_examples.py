@@ -47,3 +47,22 @@ def test_fig2_example_runs(tmp_path):
         assert step.converged and step.residual < 1e-6
         assert (np.hypot(*step.traction) <= run.mu * p * (1 + 1e-9) + 1e-300).all()
         assert step.stick.any() and step.slip.any()
+
+
+def test_paper_figure5_example_runs(tmp_path):
+    """Figs. 3-5 share one script; Fig. 5 (unequal μ, hold then ramp) exercises rolling and every
+    plot. Coarse and short here; `make demo` runs Fig. 3 at the default resolution."""
+    paper_figures = load_example("paper_figures")
+
+    results = paper_figures.main(["--figure", "5", "--out", str(tmp_path), "--steps", "4",
+                                  "--resolution", "40", "--maps-every", "2"])
+    (ds,) = results.values()
+    assert ds.attrs["status"] == "complete"
+    names = ds.state.attrs["flag_meanings"].split()
+    assert names[int(ds.state[0])] == "roll_lower"          # μ_up < μ_low: rolls on the lower
+    assert float(ds.slip_low[0]) == 0.0 and float(ds.slip_up[0]) != 0.0
+    assert (ds.rotation[1:] == 0).all()                      # then stable
+    for name in ("state", "orientation", "contact_maps"):
+        for ext in ("png", "pdf"):
+            assert (tmp_path / f"{name}.{ext}").stat().st_size > 1000
+    assert (tmp_path / "summary.txt").read_text().count("\n") == ds.sizes["step"] + 2
