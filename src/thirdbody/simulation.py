@@ -25,6 +25,7 @@ from __future__ import annotations
 import itertools
 import json
 import math
+import pickle
 import time
 import warnings
 from collections.abc import Callable, Iterator
@@ -541,27 +542,57 @@ class Simulation:
             cropped[side] = bool(np.count_nonzero(fields[f"status_{side}"]) < c.sum())
         return StepMaps(k, fields, centers, cropped)
 
-    def run(self, progress: Callable[[StepRecord], None] | None = None):
+    def run(self, progress: Callable[[StepRecord], None] | None = None,
+            checkpoint: Callable[[Simulation, _State], None] | None = None,
+            resume_from: bytes | None = None):
         """Run every load step and return the history as an :class:`xarray.Dataset`.
 
-        ``progress`` is called with each completed :class:`StepRecord`. A step that cannot be
-        completed stops the run: the dataset then holds the completed steps, its ``status``
-        attribute says why, and a warning is issued.
+        ``progress`` is called with each completed :class:`StepRecord`; ``checkpoint`` with the
+        simulation and its state after each step (to save :meth:`snapshot`). ``resume_from``
+        is a snapshot: the run continues after its last completed step and ends exactly as an
+        uninterrupted one. A step that cannot be completed stops the run: the dataset then
+        holds the completed steps, its ``status`` attribute says why, and a warning is issued.
         """
-        self.records, self.maps = [], []
+        state, start = None, 0
+        if resume_from is not None:
+            state, start = self.restore(resume_from)
+        else:
+            self.records, self.maps = [], []
         self.status = "running"
         try:
-            for record, maps, _ in self.steps():
+            for record, maps, current in self.steps(state, start):
                 self.records.append(record)
                 if maps is not None:
                     self.maps.append(maps)
                 if progress is not None:
                     progress(record)
+                if checkpoint is not None:
+                    checkpoint(self, current)
             self.status = "complete"
         except SimulationError as exc:
             self.status = f"failed: {exc}"
             warnings.warn(f"simulation stopped: {exc}", RuntimeWarning, stacklevel=2)
         return self.dataset()
+
+    def snapshot(self, state: _State) -> bytes:
+        """Everything needed to continue after the last completed step (pickled)."""
+        return pickle.dumps({
+            "inputs": self.inputs(), "state": state, "records": self.records, "maps": self.maps,
+            "map_cells": self.map_cells,
+            "interfaces": {k: (i.cells, i.last) for k, i in self.interfaces.items()},
+        })
+
+    def restore(self, blob: bytes) -> tuple[_State, int]:
+        """Load a :meth:`snapshot`; returns (state, index of the next step). The snapshot must
+        come from a run with the same inputs."""
+        data = pickle.loads(blob)
+        if data["inputs"] != self.inputs():
+            raise ValueError("cannot resume: the results were made with different inputs")
+        self.records, self.maps = list(data["records"]), list(data["maps"])
+        self.map_cells = data["map_cells"]
+        for k, (cells, last) in data["interfaces"].items():
+            self.interfaces[k].cells, self.interfaces[k].last = cells, last
+        return data["state"], len(self.records)
 
     def dataset(self):
         """The records and maps collected so far as an :class:`xarray.Dataset`."""

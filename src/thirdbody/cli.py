@@ -1,0 +1,210 @@
+"""The ``thirdbody`` command line: run, plot, examples, validate.
+
+Exit codes: 0 success; 1 a run that stopped on a failed step, or a validation check out of
+tolerance; 2 bad input (configuration, file, option); 130 interrupted (resume with --resume).
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+import sys
+import time
+from importlib import resources
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="A deformable third-body particle between two plates (FFT-BEM).")
+examples_app = typer.Typer(help="The bundled example configurations (the paper's Figs. 3-5).",
+                           invoke_without_command=True)
+app.add_typer(examples_app, name="examples")
+
+
+def _fail(message: str, code: int = 2) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def _examples() -> dict[str, Path]:
+    root = resources.files("thirdbody") / "examples"
+    return {p.name.removesuffix(".toml"): Path(str(p)) for p in root.iterdir()
+            if p.name.endswith(".toml")}
+
+
+@app.command()
+def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
+        out: Annotated[Path, typer.Option("-o", "--out", help="output directory")] = Path("out"),
+        resume: Annotated[bool, typer.Option(help="continue the run saved in OUT")] = False,
+        print_config: Annotated[bool, typer.Option(
+            "--print-config", help="print the resolved configuration and exit")] = False,
+        plots: Annotated[bool, typer.Option(help="write the figures at the end")] = True,
+        ) -> None:
+    """Run a simulation: OUT/results.nc (written after every step), OUT/config.toml, figures."""
+    import warnings
+
+    from .io import ConfigError, load_config, run_to_file
+    from .simulation import Simulation
+
+    try:
+        cfg = load_config(config)
+    except ConfigError as exc:
+        _fail(str(exc))
+    if print_config:
+        typer.echo(cfg.to_toml())
+        return
+    particle, plates, load, numerics = cfg.build()
+    sim = Simulation(particle, plates, load, **numerics)
+    results = out / "results.nc"
+    if results.exists() and not resume:
+        _fail(f"{results} exists: use --resume to continue it, or another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "config.toml").write_text(cfg.to_toml())
+    n = len(sim.schedule)
+    start = time.perf_counter()
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(TextColumn("{task.description}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total}"), TimeRemainingColumn(),
+                  transient=False) as bar:
+        task = bar.add_task("starting", total=n)
+
+        def progress(r) -> None:
+            bar.update(task, completed=r.step + 1, description=(
+                f"step {r.step}: F_N {r.normal_force:.4g} N, {r.state}, "
+                f"θ {r.orientation:.2f}°, F_T/μF_N {r.ratio_low:.3f}"))
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                ds = run_to_file(sim, results, resume=resume, progress=progress)
+        except KeyboardInterrupt:
+            typer.echo(f"\ninterrupted: {results} holds the completed steps; continue with "
+                       f"`thirdbody run {config} -o {out} --resume`", err=True)
+            raise typer.Exit(130) from None
+        except (FileNotFoundError, ValueError) as exc:
+            _fail(str(exc))
+    elapsed = time.perf_counter() - start
+    if plots and ds.sizes.get("step", 0):
+        from .plot import save_all
+
+        save_all(ds, out)
+    typer.echo(f"{sim.status}: {ds.sizes.get('step', 0)} of {n} steps in {elapsed:.1f} s -> "
+               f"{results}")
+    if sim.status != "complete":
+        raise typer.Exit(1)
+
+
+@app.command()
+def plot(results: Annotated[Path, typer.Argument(help="a results.nc file")],
+         out: Annotated[Path | None, typer.Option("-o", "--out",
+                                                  help="directory (default: next to it)")] = None,
+         ) -> None:
+    """Redraw every figure from a results file."""
+    from .io import open_results
+    from .plot import save_all
+
+    if not results.exists():
+        _fail(f"{results} does not exist")
+    try:
+        ds = open_results(results)
+    except (OSError, ValueError) as exc:
+        _fail(f"cannot read {results}: {exc}")
+    for path in save_all(ds, out or results.parent):
+        typer.echo(str(path))
+
+
+@examples_app.callback()
+def examples(ctx: typer.Context) -> None:
+    """List the bundled examples."""
+    if ctx.invoked_subcommand is None:
+        for name, path in sorted(_examples().items()):
+            first = path.read_text().splitlines()[0].lstrip("# ")
+            typer.echo(f"{name:12s} {first}")
+
+
+@examples_app.command("copy")
+def examples_copy(name: Annotated[str, typer.Argument(help="example name")],
+                  directory: Annotated[Path, typer.Argument(help="where to copy it")]) -> None:
+    """Copy an example configuration so you can edit it."""
+    found = _examples()
+    if name not in found:
+        _fail(f"no example {name!r}; choose one of: {', '.join(sorted(found))}")
+    directory.mkdir(parents=True, exist_ok=True)
+    target = directory / f"{name}.toml"
+    shutil.copyfile(found[name], target)
+    typer.echo(str(target))
+
+
+@app.command()
+def validate() -> None:
+    """Run the analytic checks at a quick resolution and print computed vs analytic values."""
+    rows = _validation_rows()
+    width = max(len(r[0]) for r in rows)
+    typer.echo(f"{'check':{width}s}  {'computed':>12s}  {'analytic':>12s}  {'error':>9s}  "
+               f"{'tolerance':>9s}  ok")
+    bad = 0
+    for name, computed, analytic, tol in rows:
+        err = abs(computed / analytic - 1) if analytic else abs(computed)
+        ok = err <= tol
+        bad += not ok
+        typer.echo(f"{name:{width}s}  {computed:12.6g}  {analytic:12.6g}  {err:9.2e}  "
+                   f"{tol:9.1e}  {'yes' if ok else 'NO'}")
+    if bad:
+        typer.echo(f"{bad} check(s) out of tolerance", err=True)
+        raise typer.Exit(1)
+
+
+def _validation_rows() -> list[tuple[str, float, float, float]]:
+    import numpy as np
+
+    import thirdbody as tb
+    from thirdbody import rigid
+    from thirdbody.reference import hertz, mindlin
+    from thirdbody.shapes import Ellipsoid
+
+    rows = []
+    mat = tb.Material(210e9, 0.3)
+    L, W, R = 1e-3, 1.0, 4 * mat.E_star * (1e-3 / 8) ** 3 / 3
+    grid = tb.Grid(128, L / 128)
+    normal = tb.solve_normal(grid.paraboloid(R), grid, mat, force=W)
+    ref = hertz.sphere(W, R, mat.E_star)
+    rows += [("Hertz sphere 128²: approach (m)", normal.approach, ref.approach, 1e-3),
+             ("Hertz sphere 128²: peak pressure (Pa)", float(normal.pressure.max()),
+              ref.peak_pressure, 3e-3)]
+    mu = 0.5
+    t = tb.solve_tangential(normal, mu, force=0.5 * mu * W)
+    cm = mindlin.cattaneo_mindlin(0.5 * mu * W, W, mu, R, mat.E, mat.nu)
+    rows += [("Cattaneo-Mindlin Q=0.5μP: shift (m)", float(t.shift[0]), cm.shift, 1e-2),
+             ("Cattaneo-Mindlin Q=0.5μP: stick radius (m)",
+              math.sqrt(t.stick_area / math.pi), cm.stick_radius, 0.05)]
+    q_star = 0.8 * mu * W
+    loaded = tb.solve_tangential(normal, mu, force=q_star)
+    unloaded = tb.solve_tangential(normal, mu, force=0.0, previous=loaded)
+    md = mindlin.mindlin_deresiewicz_unloading(0.0, q_star, W, mu, R, mat.E, mat.nu)
+    rows.append(("Mindlin-Deresiewicz unloaded to 0: shift (m)", float(unloaded.shift[0]),
+                 md.shift, 2e-2))
+    A, B, C = 1e-3, 0.8e-3, 0.6e-3
+    sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), mat, 20.0), tb.Plates(0.6),
+                        tb.ForceTable([0.5]), resolution=400, maps_every=0)
+    ds = sim.run()
+    rows.append(("rigid criterion: steel ellipsoid θ=20°, |F'_x|/F_N",
+                 float(np.abs(ds.tangential_force_x[0]) / ds.normal_force[0]),
+                 rigid.ellipsoid_xi(A, C, math.radians(20.0)), 2e-3))
+    sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), mat, 20.0), tb.Plates(0.3),
+                        tb.ForceTable([1.0]), resolution=100, maps_every=0)
+    ds = sim.run()
+    rows.append(("rigid equilibrium angle, μ=0.3 (deg)", float(ds.orientation[0]),
+                 math.degrees(rigid.ellipsoid_equilibrium_angle(A, C, math.radians(20.0), 0.3)),
+                 5e-3))
+    return rows
+
+
+def main() -> None:  # pragma: no cover - console entry point
+    app(prog_name="thirdbody")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

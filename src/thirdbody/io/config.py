@@ -1,0 +1,252 @@
+"""Run configuration: a TOML file validated by pydantic, with every default in one place.
+
+A configuration has four tables (SI units throughout; angles in degrees)::
+
+    [particle]                      # the shape and its material
+    shape = "potato"                # "sphere" | "ellipsoid" | "potato" | "mesh"
+    semi_axes = [1.0e-3, 0.8e-3, 0.7e-3]   # m (ellipsoid, potato)
+    seed = 4                        # potato: random waves
+    amplitude = 0.1                 # potato: relative amplitude of each wave
+    wavenumber_range = [4.0, 8.0]   # potato
+    E = 1.0e9                       # Pa, > 0
+    nu = 0.3                        # (-1, 0.5]
+    orientation_deg = 20.0
+
+    [plates]
+    mu_up = 0.46                    # >= 0
+    mu_low = 0.46                   # >= 0, default mu_up
+
+    [load]
+    program = "linear_ramp"         # "linear_ramp" | "hold_then_ramp" | "force_table" | "gap_ramp"
+    stop = 10.0                     # N (compression ratio for gap_ramp)
+    steps = 30
+
+    [numerics]
+    resolution = 80.0               # cells per particle size
+    maps_every = 5
+
+Unknown keys, wrong types and out-of-range values are refused with one message per problem,
+naming the key and the allowed range (:class:`ConfigError`).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+__all__ = ["Config", "ConfigError", "load_config"]
+
+
+class ConfigError(ValueError):
+    """An invalid configuration; the message lists every problem with its key."""
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class SphereShape(_Model):
+    shape: Literal["sphere"]
+    radius: Annotated[float, Field(gt=0, description="m")]
+
+
+class EllipsoidShape(_Model):
+    shape: Literal["ellipsoid"]
+    semi_axes: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)],
+                     Annotated[float, Field(gt=0)]] = Field(description="m: A (x), B (y), C (z)")
+
+
+class PotatoShape(_Model):
+    shape: Literal["potato"]
+    semi_axes: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)],
+                     Annotated[float, Field(gt=0)]] = Field(description="m")
+    seed: Annotated[int, Field(ge=0)] = 0
+    n_waves: Annotated[int, Field(ge=0, le=20)] = 3
+    amplitude: Annotated[float, Field(ge=0, le=0.5)] = 0.05
+    wavenumber_range: tuple[Annotated[float, Field(ge=0)], Annotated[float, Field(ge=0)]] = (2, 4)
+
+
+class MeshShapeConfig(_Model):
+    shape: Literal["mesh"]
+    file: str = Field(description="STL/OBJ/PLY path, relative to the config file")
+    scale: Annotated[float, Field(gt=0)] = 1.0
+
+
+class Particle(_Model):
+    geometry: Annotated[SphereShape | EllipsoidShape | PotatoShape | MeshShapeConfig,
+                        Field(discriminator="shape")]
+    E: Annotated[float, Field(gt=0, description="Young's modulus, Pa")]
+    nu: Annotated[float, Field(gt=-1, le=0.5, description="Poisson ratio")]
+    orientation_deg: float = 0.0
+
+
+class Plates(_Model):
+    mu_up: Annotated[float, Field(ge=0, description="friction coefficient, upper plate")]
+    mu_low: Annotated[float | None, Field(ge=0)] = None
+
+
+class LinearRampLoad(_Model):
+    program: Literal["linear_ramp"]
+    stop: Annotated[float, Field(gt=0, description="final normal force, N")]
+    steps: Annotated[int, Field(ge=1)] = 50
+    start: Annotated[float | None, Field(gt=0)] = None
+
+
+class HoldThenRampLoad(_Model):
+    program: Literal["hold_then_ramp"]
+    hold: Annotated[float, Field(gt=0, description="N")]
+    hold_steps: Annotated[int, Field(ge=1)]
+    stop: Annotated[float, Field(gt=0, description="N")]
+    ramp_steps: Annotated[int, Field(ge=1)]
+
+
+class ForceTableLoad(_Model):
+    program: Literal["force_table"]
+    forces: list[Annotated[float, Field(gt=0)]] = Field(min_length=1, description="N")
+
+
+class GapRampLoad(_Model):
+    program: Literal["gap_ramp"]
+    stop: Annotated[float, Field(gt=0, le=0.5, description="final compression (d0-h)/d0")]
+    steps: Annotated[int, Field(ge=1)] = 50
+    start: Annotated[float | None, Field(gt=0, le=0.5)] = None
+
+
+class Numerics(_Model):
+    resolution: Annotated[float, Field(ge=10, le=4000, description="cells per particle size")] \
+        = 80.0
+    cell_size: Annotated[float | None, Field(gt=0, description="m; overrides resolution")] = None
+    tol: Annotated[float, Field(gt=0, lt=1e-2)] = 1e-8
+    angle_step_deg: Annotated[float, Field(gt=0, le=10)] = 1.0
+    angle_tol_deg: Annotated[float, Field(gt=0, le=1)] = 0.01
+    maps_every: Annotated[int, Field(ge=0)] = 5
+    classification: Literal["statics", "paper"] = "statics"
+
+
+class Config(_Model):
+    particle: Particle
+    plates: Plates
+    load: Annotated[LinearRampLoad | HoldThenRampLoad | ForceTableLoad | GapRampLoad,
+                    Field(discriminator="program")]
+    numerics: Numerics = Numerics()
+    base_dir: str = Field(default=".", exclude=True)
+
+    @model_validator(mode="before")
+    @classmethod
+    def _split_particle(cls, data):
+        # the TOML's [particle] table holds both the geometry keys and the material keys
+        if isinstance(data, dict) and isinstance(data.get("particle"), dict):
+            p = dict(data["particle"])
+            if "geometry" not in p:
+                material = {k: p.pop(k) for k in ("E", "nu", "orientation_deg") if k in p}
+                data = {**data, "particle": {"geometry": p, **material}}
+        return data
+
+    # --- building the objects ---------------------------------------------------------------
+    def build(self):
+        """(Particle, Plates, load program, Simulation keyword arguments)."""
+        import thirdbody as tb
+        from thirdbody import shapes
+
+        g = self.particle.geometry
+        if isinstance(g, SphereShape):
+            shape = shapes.Sphere(g.radius)
+        elif isinstance(g, EllipsoidShape):
+            shape = shapes.Ellipsoid(g.semi_axes)
+        elif isinstance(g, PotatoShape):
+            shape = shapes.Potato(g.semi_axes, seed=g.seed, n_waves=g.n_waves,
+                                  amplitude=g.amplitude, wavenumber_range=g.wavenumber_range)
+        else:
+            path = Path(g.file)
+            if not path.is_absolute():
+                path = Path(self.base_dir) / path
+            shape = shapes.MeshShape.from_file(path, scale=g.scale)
+        particle = tb.Particle(shape, tb.Material(self.particle.E, self.particle.nu),
+                               self.particle.orientation_deg)
+        plates = tb.Plates(self.plates.mu_up, self.plates.mu_low)
+        ld = self.load
+        if isinstance(ld, LinearRampLoad):
+            load = tb.LinearRamp(stop=ld.stop, steps=ld.steps, start=ld.start)
+        elif isinstance(ld, HoldThenRampLoad):
+            load = tb.HoldThenRamp(ld.hold, ld.hold_steps, ld.stop, ld.ramp_steps)
+        elif isinstance(ld, ForceTableLoad):
+            load = tb.ForceTable(ld.forces)
+        else:
+            load = tb.GapRamp(stop=ld.stop, steps=ld.steps, start=ld.start)
+        return particle, plates, load, self.numerics.model_dump()
+
+    def to_toml(self) -> str:
+        """The resolved configuration (defaults filled in) as TOML text."""
+        data = self.model_dump(exclude={"base_dir"})
+        particle = data.pop("particle")
+        particle = {**particle.pop("geometry"), **particle}
+        data = {"particle": particle, **data}
+        return _dump_toml(data)
+
+
+def _format_errors(exc: ValidationError, source: str) -> str:
+    lines = [f"invalid configuration {source}:"]
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"] if p not in ("geometry",) and not
+                       str(p).endswith("Shape") and not str(p).endswith("Load")
+                       and p not in ("sphere", "ellipsoid", "potato", "mesh", "linear_ramp",
+                                     "hold_then_ramp", "force_table", "gap_ramp"))
+        msg = err["msg"]
+        if err["type"] == "extra_forbidden":
+            msg = "unknown key"
+        ctx = err.get("ctx") or {}
+        allowed = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
+        got = err.get("input")
+        detail = f" (allowed: {allowed})" if allowed else ""
+        lines.append(f"  {loc}: {msg}{detail}; got {got!r}" if err["type"] != "missing"
+                     else f"  {loc}: required key missing")
+    return "\n".join(lines)
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate a TOML configuration; :class:`ConfigError` lists every problem."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ConfigError(f"cannot read configuration {path}: {exc.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"configuration {path} is not valid TOML: {exc}") from None
+    return parse_config(data, source=str(path), base_dir=str(path.parent))
+
+
+def parse_config(data: dict, source: str = "<dict>", base_dir: str = ".") -> Config:
+    try:
+        cfg = Config.model_validate({**data, "base_dir": base_dir})
+    except ValidationError as exc:
+        raise ConfigError(_format_errors(exc, source)) from None
+    try:
+        cfg.build()
+    except (ValueError, OSError) as exc:       # checks only the objects can make
+        raise ConfigError(f"invalid configuration {source}: {exc}") from None
+    return cfg
+
+
+def _dump_toml(data: dict) -> str:
+    def value(v) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+
+    out = []
+    for table, entries in data.items():
+        out.append(f"[{table}]")
+        for k, v in entries.items():
+            if v is not None:
+                out.append(f"{k} = {value(v)}")
+        out.append("")
+    return "\n".join(out)

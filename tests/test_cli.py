@@ -1,0 +1,149 @@
+"""The command line: config validation (exit 2, nothing written), --print-config, run, plot,
+examples, validate, and a run killed with SIGKILL then resumed equals an uninterrupted one."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+from thirdbody.cli import app
+from thirdbody.io import RESUME_VARIABLE, open_results
+
+runner = CliRunner()
+
+SMALL = """
+[particle]
+shape = "potato"
+semi_axes = [1.0e-3, 0.8e-3, 0.7e-3]
+seed = 4
+amplitude = 0.1
+wavenumber_range = [4.0, 8.0]
+E = 1.0e9
+nu = 0.3
+orientation_deg = 20.0
+
+[plates]
+mu_up = 0.46
+
+[load]
+program = "linear_ramp"
+stop = 10.0
+steps = {steps}
+
+[numerics]
+resolution = 40.0
+maps_every = 3
+"""
+
+
+def write(tmp_path, text, name="run.toml"):
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("change, key", [
+    (("E = 1.0e9", "E = -1.0"), "particle.E"),
+    (("nu = 0.3", "nu = 0.7"), "particle.nu"),
+    (("mu_up = 0.46", "mu_up = -0.1"), "plates.mu_up"),
+    (("steps = {steps}", "steps = 0"), "load.steps"),
+    (("stop = 10.0", "stop = 'ten'"), "load.stop"),
+    (("seed = 4", "seed = 4\ncolour = 'red'"), "colour"),
+    (("[numerics]", "[numerics]\nresolution_typo = 3"), "resolution_typo"),
+    (("resolution = 40.0", "resolution = 2.0"), "numerics.resolution"),
+    (("amplitude = 0.1", "amplitude = 0.4\nn_waves = 3"), "amplitude"),
+])
+def test_bad_configuration_exits_2_names_the_key_and_writes_nothing(tmp_path, change, key):
+    text = SMALL.replace(*change).replace("{steps}", "3")
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(write(tmp_path, text)), "-o", str(out)])
+    assert result.exit_code == 2, result.output
+    assert key in result.output
+    assert not out.exists()
+
+
+def test_broken_toml_and_missing_file(tmp_path):
+    result = runner.invoke(app, ["run", str(write(tmp_path, "[particle\nE = 1"))])
+    assert result.exit_code == 2 and "not valid TOML" in result.output
+    result = runner.invoke(app, ["run", str(tmp_path / "nope.toml")])
+    assert result.exit_code == 2 and "cannot read" in result.output
+
+
+def test_print_config_shows_the_resolved_defaults(tmp_path):
+    result = runner.invoke(app, ["run", str(write(tmp_path, SMALL.replace("{steps}", "3"))),
+                                 "--print-config"])
+    assert result.exit_code == 0
+    resolved = tomllib.loads(result.output)
+    assert resolved["numerics"]["tol"] == 1e-8            # a default, filled in
+    assert resolved["particle"]["E"] == 1e9
+
+
+def test_run_plot_and_examples(tmp_path):
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(write(tmp_path, SMALL.replace("{steps}", "3"))),
+                                 "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    ds = open_results(out / "results.nc")
+    assert ds.attrs["status"] == "complete" and ds.sizes["step"] == 3
+    assert RESUME_VARIABLE not in ds
+    assert (out / "config.toml").exists() and (out / "state.png").exists()
+    again = runner.invoke(app, ["run", str(tmp_path / "run.toml"), "-o", str(out)])
+    assert again.exit_code == 2 and "exists" in again.output
+    (out / "state.png").unlink()
+    assert runner.invoke(app, ["plot", str(out / "results.nc")]).exit_code == 0
+    assert (out / "state.png").stat().st_size > 1000
+    listing = runner.invoke(app, ["examples"])
+    assert "fig3" in listing.output and "fig5" in listing.output
+    copied = runner.invoke(app, ["examples", "copy", "fig5", str(tmp_path / "ex")])
+    assert copied.exit_code == 0 and (tmp_path / "ex" / "fig5.toml").exists()
+    assert runner.invoke(app, ["examples", "copy", "nope", str(tmp_path)]).exit_code == 2
+
+
+def test_validate_prints_the_table_and_passes():
+    result = runner.invoke(app, ["validate"])
+    assert result.exit_code == 0, result.output
+    assert result.output.count(" yes") == 7 and "NO" not in result.output
+
+
+def _steps_done(path):
+    try:
+        with xr.open_dataset(path, engine="h5netcdf") as ds:
+            return ds.sizes.get("step", 0), ds.attrs["status"]
+    except (OSError, KeyError, ValueError):
+        return 0, None
+
+
+@pytest.mark.slow
+def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path):
+    config = write(tmp_path, SMALL.replace("{steps}", "24"))
+    cmd = [sys.executable, "-m", "thirdbody.cli", "run", str(config), "--no-plots"]
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen([*cmd, "-o", str(killed)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while time.time() < deadline:
+        done, status = _steps_done(killed / "results.nc")
+        if done >= 3 and status == "running":
+            break
+        assert proc.poll() is None, "the run finished before it could be killed"
+        time.sleep(0.05)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    done, status = _steps_done(killed / "results.nc")
+    assert status == "running" and 3 <= done < 24          # a valid file of complete steps
+    resumed = subprocess.run([*cmd, "-o", str(killed), "--resume"], capture_output=True)
+    assert resumed.returncode == 0, resumed.stderr
+    straight = subprocess.run([*cmd, "-o", str(tmp_path / "straight")], capture_output=True)
+    assert straight.returncode == 0, straight.stderr
+    a = open_results(killed / "results.nc")
+    b = open_results(tmp_path / "straight" / "results.nc")
+    timers = [v for v in a.data_vars if v.startswith("time_")]
+    assert a.drop_vars(timers).identical(b.drop_vars(timers))
+    assert np.array_equal(a.pressure_low.values, b.pressure_low.values)
