@@ -32,19 +32,9 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from _peers import _capture_fd  # noqa: E402
+from _peers import _cached, _capture_fd  # noqa: E402
 
 __all__ = ["AspherFriction", "solve_tamaas"]
-
-_CACHE: dict[tuple, object] = {}
-
-
-def _cached(key: tuple, build):
-    if key not in _CACHE:
-        for k in [k for k in _CACHE if k[0] == key[0]]:
-            del _CACHE[k]
-        _CACHE[key] = build()
-    return _CACHE[key]
 
 
 def _check(gap: np.ndarray) -> np.ndarray:
