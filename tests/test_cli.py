@@ -59,6 +59,7 @@ def write(tmp_path, text, name="run.toml"):
     (("[numerics]", "[numerics]\nresolution_typo = 3"), "resolution_typo"),
     (("resolution = 40.0", "resolution = 2.0"), "numerics.resolution"),
     (("amplitude = 0.1", "amplitude = 0.4\nn_waves = 3"), "amplitude"),
+    (("stop = 10.0", "stop = 0.001"), "numerics.resolution"),        # contact of a few cells
 ])
 def test_bad_configuration_exits_2_names_the_key_and_writes_nothing(tmp_path, change, key):
     text = SMALL.replace(*change).replace("{steps}", "3")

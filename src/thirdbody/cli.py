@@ -46,7 +46,7 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
     import warnings
 
     from .io import ConfigError, load_config, run_to_file
-    from .simulation import Simulation
+    from .simulation import Simulation, SimulationError
 
     try:
         cfg = load_config(config)
@@ -60,6 +60,13 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
     results = out / "results.nc"
     if results.exists() and not resume:
         _fail(f"{results} exists: use --resume to continue it, or another --out")
+    if not resume:
+        try:
+            sim.preflight()
+        except ValueError as exc:
+            _fail(f"invalid configuration {config}: numerics.{exc}")
+        except SimulationError as exc:
+            _fail(f"invalid configuration {config}: {exc}")
     out.mkdir(parents=True, exist_ok=True)
     (out / "config.toml").write_text(cfg.to_toml())
     n = len(sim.schedule)

@@ -402,18 +402,39 @@ class Simulation:
             state.slip_low += d * (z_bottom - pivot)
 
     # --- the run -------------------------------------------------------------------------
-    def _estimate_map_cells(self) -> int:
+    #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
+    MIN_CONTACT_CELLS = 8
+
+    def preflight(self) -> int:
+        """Solve the largest load at the initial orientation once: sets the map size and
+        checks the resolution. Returns the contact's extent in cells.
+
+        Raises ValueError (naming ``resolution``) when the contact at the largest load spans
+        fewer than :attr:`MIN_CONTACT_CELLS` cells: the solution would not be resolved.
+        Raises :class:`SimulationError` when that load cannot be solved at all.
+        """
         step = max(self.schedule, key=lambda s: s.value)
         state = _State(theta=self.particle.orientation)
-        ev = self._evaluate(self.particle.orientation, step, state)
+        try:
+            ev = self._evaluate(self.particle.orientation, step, state)
+        except (ConvergenceError, ContactAtEdgeError) as exc:
+            raise SimulationError(f"the largest load cannot be solved: {exc}") from exc
+        finally:
+            for i in self.interfaces.values():
+                i.last = None
         extent = 0
         for sol in (ev.up, ev.low):
             c = sol.contact.contact
             rows, cols = np.flatnonzero(c.any(axis=1)), np.flatnonzero(c.any(axis=0))
             extent = max(extent, rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1)
-        for i in self.interfaces.values():
-            i.last = None
-        return max(32, math.ceil(1.25 * extent / 16) * 16)
+        if self.map_cells is None:
+            self.map_cells = max(32, math.ceil(1.25 * extent / 16) * 16)
+        if extent < self.MIN_CONTACT_CELLS:
+            needed = self.resolution * self.MIN_CONTACT_CELLS / max(extent, 1)
+            raise ValueError(
+                f"resolution (cells per particle size) {self.resolution:.4g} is too coarse: the "
+                f"contact at the largest load spans {extent} cells; use at least {needed:.0f}")
+        return int(extent)
 
     def steps(self, state: _State | None = None, start: int = 0,
               ) -> Iterator[tuple[StepRecord, StepMaps | None, _State]]:
@@ -423,8 +444,10 @@ class Simulation:
         """
         if self.map_cells is None and self.maps_every:
             try:
-                self.map_cells = self._estimate_map_cells()
-            except (ConvergenceError, ContactAtEdgeError, SimulationError):
+                self.preflight()
+            except ValueError:
+                pass                        # coarse but allowed from Python; the CLI refuses
+            except SimulationError:
                 self.map_cells = 64         # the step that cannot be solved will say why
         state = state or _State(theta=self.particle.orientation)
         n_steps = len(self.schedule)
