@@ -26,7 +26,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "examples"))
 
 import thirdbody as tb  # noqa: E402
-from paper_figures import MATERIAL, THETA0, cases, potato  # noqa: E402
+from paper_figures import MATERIAL, PARTICLES, cases, potato  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> dict:
@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None) -> dict:
     args = parser.parse_args(argv)
     tb.set_workers(1)
     name, plates, load = cases(3, args.steps)[0]
-    sim = tb.Simulation(tb.Particle(potato(), MATERIAL, THETA0), plates, load,
+    sim = tb.Simulation(tb.Particle(potato(3), MATERIAL, PARTICLES[3][3]), plates, load,
                         resolution=args.resolution, maps_every=5)
     start = time.perf_counter()
     ds = sim.run()

@@ -9,11 +9,13 @@
   particle rolls about the lower contact (the upper one slides) until it is stable, then is
   compressed without turning.
 
-The potato (:class:`thirdbody.shapes.Potato`) is an ellipsoid with semi-axes 1.0 x 0.8 x 0.7 mm
-modulated by three random sine waves of 10 % amplitude and angular wavenumbers 4-8
-(seed ``SEED``), symmetric about the xz
-plane; E = 1 GPa, ν = 0.3 (a stiff polymer). The paper's own potato is unpublished; these
-parameters were chosen so that the same phenomena appear (see the README for the angles).
+The potatoes (:class:`thirdbody.shapes.Potato`, table ``PARTICLES``) are ellipsoids with
+semi-axes 1.0 x 0.8 x 0.7 mm modulated by three random sine waves, symmetric about the xz plane;
+E = 1 GPa, ν = 0.3 (a stiff polymer). The paper's own potato is unpublished. Fig. 3 uses
+seed 4 (10 % waves, angular wavenumbers 4-8, θ₀ = 20°): its contacts grow unevenly, and at
+about 5 % compression a second bump lands on the plate. Fig. 4 uses seed 27 (5.5 % waves,
+wavenumbers 2-4, θ₀ = −41°, |ξ(θ₀)| = 0.39), and so does Fig. 5. It turns 6.3° for
+μ = 0.3 and 8.8° for μ = 0.2 (the paper: about 6° and 9°), and then sticks.
 
 Usage::
 
@@ -34,17 +36,22 @@ import thirdbody as tb
 from thirdbody.plot import save_all
 from thirdbody.shapes import Potato
 
-SEED = 4
 SEMI_AXES = (1.0e-3, 0.8e-3, 0.7e-3)      # m
-AMPLITUDE = 0.10
-WAVENUMBERS = (4.0, 8.0)
-THETA0 = 20.0                            # degrees
 MATERIAL = tb.Material(1e9, 0.3)          # Pa, -
-F_MAX = 10.0                              # N: about 5 % compression
+F_MAX = 10.0                              # N
+
+#: (seed, amplitude, wavenumber range, initial orientation in degrees) of the potato per figure
+PARTICLES = {
+    3: (4, 0.10, (4.0, 8.0), 20.0),       # sticks, turns as the contacts grow, a bump lands
+    4: (27, 0.055, (2.0, 4.0), -41.0),    # |ξ(θ₀)| = 0.39: turns at first contact, then sticks
+    5: (27, 0.055, (2.0, 4.0), -41.0),    # the Fig. 4 particle
+}
+SEED, AMPLITUDE, WAVENUMBERS, THETA0 = PARTICLES[3]
 
 
-def potato() -> Potato:
-    return Potato(SEMI_AXES, seed=SEED, amplitude=AMPLITUDE, wavenumber_range=WAVENUMBERS)
+def potato(figure: int = 3) -> Potato:
+    seed, amplitude, wavenumbers, _ = PARTICLES[figure]
+    return Potato(SEMI_AXES, seed=seed, amplitude=amplitude, wavenumber_range=wavenumbers)
 
 
 def cases(figure: int, steps: int) -> list[tuple[str, tb.Plates, object]]:
@@ -62,8 +69,8 @@ def cases(figure: int, steps: int) -> list[tuple[str, tb.Plates, object]]:
 
 
 def run_case(name: str, plates: tb.Plates, load, resolution: float, out: Path,
-             maps_every: int) -> object:
-    particle = tb.Particle(potato(), MATERIAL, THETA0)
+             maps_every: int, figure: int = 3) -> object:
+    particle = tb.Particle(potato(figure), MATERIAL, PARTICLES[figure][3])
     sim = tb.Simulation(particle, plates, load, resolution=resolution, maps_every=maps_every)
     start = time.perf_counter()
 
@@ -103,7 +110,8 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     results = {}
     for name, plates, load in cases(args.figure, args.steps):
         out = args.out if len(cases(args.figure, args.steps)) == 1 else args.out / name
-        results[name] = run_case(name, plates, load, args.resolution, out, args.maps_every)
+        results[name] = run_case(name, plates, load, args.resolution, out, args.maps_every,
+                                 args.figure)
     return results
 
 
