@@ -101,7 +101,9 @@ def test_run_plot_and_examples(tmp_path):
     assert runner.invoke(app, ["plot", str(out / "results.nc")]).exit_code == 0
     assert (out / "state.png").stat().st_size > 1000
     listing = runner.invoke(app, ["examples"])
-    assert "fig3" in listing.output and "fig5" in listing.output
+    assert all(f"fig{k}" in listing.output for k in (2, 3, 5))
+    assert runner.invoke(app, ["examples", "copy", "fig2", str(tmp_path / "ex")]).exit_code == 0
+    assert (tmp_path / "ex" / "fig2.py").stat().st_size > 1000
     copied = runner.invoke(app, ["examples", "copy", "fig5", str(tmp_path / "ex")])
     assert copied.exit_code == 0 and (tmp_path / "ex" / "fig5.toml").exists()
     assert runner.invoke(app, ["examples", "copy", "nope", str(tmp_path)]).exit_code == 2

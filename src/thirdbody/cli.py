@@ -29,9 +29,13 @@ def _fail(message: str, code: int = 2) -> None:
 
 
 def _examples() -> dict[str, Path]:
+    """Bundled examples by name: the TOML configurations, and ``fig2`` (a Python script: the
+    single-interface partial-slip example, run with ``python fig2.py --out DIR``)."""
     root = resources.files("thirdbody") / "examples"
-    return {p.name.removesuffix(".toml"): Path(str(p)) for p in root.iterdir()
-            if p.name.endswith(".toml")}
+    found = {p.name.removesuffix(".toml"): Path(str(p)) for p in root.iterdir()
+             if p.name.endswith(".toml")}
+    found["fig2"] = Path(str(root / "fig2_partial_slip.py"))
+    return found
 
 
 @app.command()
@@ -128,7 +132,11 @@ def examples(ctx: typer.Context) -> None:
     """List the bundled examples."""
     if ctx.invoked_subcommand is None:
         for name, path in sorted(_examples().items()):
-            first = path.read_text().splitlines()[0].lstrip("# ")
+            if path.suffix == ".py":
+                first = ("Fig. 2: partial slip of a tilted ellipsoid on a plate shifted in steps "
+                         "(a script: python fig2.py --out DIR)")
+            else:
+                first = path.read_text().splitlines()[0].lstrip("# ")
             typer.echo(f"{name:12s} {first}")
 
 
@@ -140,7 +148,7 @@ def examples_copy(name: Annotated[str, typer.Argument(help="example name")],
     if name not in found:
         _fail(f"no example {name!r}; choose one of: {', '.join(sorted(found))}")
     directory.mkdir(parents=True, exist_ok=True)
-    target = directory / f"{name}.toml"
+    target = directory / f"{name}{found[name].suffix}"
     shutil.copyfile(found[name], target)
     typer.echo(str(target))
 
