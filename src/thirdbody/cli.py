@@ -1,4 +1,4 @@
-"""The ``thirdbody`` command line: run, plot, examples, validate.
+"""The ``thirdbody`` command line: run, sweep, plot, examples, validate.
 
 Exit codes: 0 success; 1 a run that stopped on a failed step, or a validation check out of
 tolerance; 2 bad input (configuration, file, option); 130 interrupted (resume with --resume).
@@ -90,7 +90,8 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
-                ds = run_to_file(sim, results, resume=resume, progress=progress)
+                ds = run_to_file(sim, results, resume=resume, progress=progress,
+                                 attrs={"config": cfg.to_toml()})
         except KeyboardInterrupt:
             typer.echo(f"\ninterrupted: {results} holds the completed steps; continue with "
                        f"`thirdbody run {config} -o {out} --resume`", err=True)
@@ -109,11 +110,86 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
 
 
 @app.command()
-def plot(results: Annotated[Path, typer.Argument(help="a results.nc file")],
+def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base + axes)")],
+          out: Annotated[Path, typer.Option("-o", "--out", help="output directory")] = Path(
+              "sweep"),
+          scheduler: Annotated[str | None, typer.Option(
+              help="address of a running Dask scheduler, e.g. tcp://host:8786 "
+                   "(default: start a local cluster)")] = None,
+          workers: Annotated[int | None, typer.Option(
+              min=1, help="worker processes of the local cluster (default: one per core)")]
+          = None,
+          dry_run: Annotated[bool, typer.Option(
+              "--dry-run", help="list the cases (and which are done) and exit")] = False,
+          plots: Annotated[bool, typer.Option(help="write the state map at the end")] = True,
+          ) -> None:
+    """Run the Cartesian product of a sweep on dask.distributed: OUT/cases/<hash>.nc per case,
+    OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases."""
+    import warnings
+
+    from .sweep import SweepError, _case_status, load_sweep, run_sweep
+
+    if scheduler and workers:
+        _fail("--workers applies to the local cluster only; with --scheduler the cluster's "
+              "own workers run the cases")
+    try:
+        spec = load_sweep(sweep_file)
+        cases = spec.cases()
+    except SweepError as exc:
+        _fail(str(exc))
+    if dry_run:
+        keys = [a.key for a in spec.axes]
+        typer.echo("case              " + "  ".join(keys) + "  done")
+        for c in cases:
+            done = _case_status(out / "cases" / c.filename) or "-"
+            typer.echo(f"{c.case_id}  " + "  ".join(f"{c.values[k]!s:>{len(k)}}" for k in keys)
+                       + f"  {done}")
+        typer.echo(f"{len(cases)} cases ({' x '.join(str(n) for n in spec.shape)})")
+        return
+    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+
+    failed = 0
+    with Progress(TextColumn("{task.description}"), BarColumn(),
+                  TextColumn("{task.completed}/{task.total} cases"), TimeRemainingColumn(),
+                  transient=False) as bar:
+        task = bar.add_task("starting the cluster", total=len(cases))
+
+        def progress(record: dict, done: int, total: int) -> None:
+            nonlocal failed
+            failed += record["status"] != "complete"
+            what = "skipped (done)" if record.get("skipped") else record["status"][:40]
+            bar.update(task, completed=done, description=(
+                f"{record['case']}: {what}; {failed} not complete"))
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                report = run_sweep(spec, out, scheduler=scheduler, workers=workers,
+                                   plots=plots, progress=progress)
+        except KeyboardInterrupt:
+            typer.echo(f"\ninterrupted: finished cases are kept in {out / 'cases'}; rerun the "
+                       "same command to continue", err=True)
+            raise typer.Exit(130) from None
+        except OSError as exc:
+            _fail(f"cannot reach the Dask scheduler {scheduler}: {exc}" if scheduler
+                  else str(exc))
+    typer.echo(f"{len(cases)} cases: {report.computed} run, {report.skipped} already done, "
+               f"{len(report.failures)} not complete, in {report.elapsed:.1f} s -> "
+               f"{out / 'summary.nc'}")
+    for case, status in report.failures.items():
+        typer.echo(f"  {case}: {status}  (see {out / 'cases' / case}.error.txt or .nc)",
+                   err=True)
+    if report.failures:
+        raise typer.Exit(1)
+
+
+@app.command()
+def plot(results: Annotated[Path, typer.Argument(
+        help="a results.nc file, or a sweep's summary.nc")],
          out: Annotated[Path | None, typer.Option("-o", "--out",
                                                   help="directory (default: next to it)")] = None,
          ) -> None:
-    """Redraw every figure from a results file."""
+    """Redraw every figure from a results file (or the state map from a sweep summary)."""
     from .io import open_results
     from .plot import save_all
 
@@ -123,7 +199,13 @@ def plot(results: Annotated[Path, typer.Argument(help="a results.nc file")],
         ds = open_results(results)
     except (OSError, ValueError) as exc:
         _fail(f"cannot read {results}: {exc}")
-    for path in save_all(ds, out or results.parent):
+    if "behaviour" in ds:                       # a sweep's summary.nc
+        from .plot import save_state_map
+
+        written = save_state_map(ds, out or results.parent)
+    else:
+        written = save_all(ds, out or results.parent)
+    for path in written:
         typer.echo(str(path))
 
 

@@ -7,11 +7,13 @@ position history, and contact maps. Every function takes the :class:`xarray.Data
 from __future__ import annotations
 
 import json
+from itertools import product as itertools_product
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["contact_maps", "orientation_history", "save_all", "state_curve"]
+__all__ = ["contact_maps", "orientation_history", "save_all", "save_state_map", "state_curve",
+           "state_map"]
 
 _STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
 
@@ -96,9 +98,29 @@ def orientation_history(ds):
     return fig
 
 
+def _nice_length(span: float) -> float:
+    """A round length (1, 2 or 5 × 10ᵏ) near a quarter of ``span``."""
+    target = span / 4
+    power = 10.0 ** np.floor(np.log10(target))
+    return float(max(m * power for m in (1, 2, 5) if m * power <= target))
+
+
+def _scale_bar(ax, span_um: float) -> None:
+    """A white-boxed scale bar in the lower right corner, labelled in µm or mm."""
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    length = _nice_length(span_um)
+    label = f"{length / 1000:g} mm" if length >= 1000 else f"{length:g} µm"
+    bar = AnchoredSizeBar(ax.transData, length, label, "lower right", pad=0.3, borderpad=0.4,
+                          sep=3, frameon=True, size_vertical=span_um / 150,
+                          fontproperties={"size": 7})
+    bar.patch.set_alpha(0.8)
+    ax.add_artist(bar)
+
+
 def contact_maps(ds, steps: list[int] | None = None):
     """Pressure and stick/slip/open maps of both interfaces at the chosen steps (default: the
-    first, the middle and the last stored map), side by side, axes in µm."""
+    first, the middle and the last stored map), side by side, axes in µm with a scale bar."""
     plt = _plt()
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -128,6 +150,7 @@ def contact_maps(ds, steps: list[int] | None = None):
             for ax in (ax_p, ax_s):
                 ax.set_xlabel("x (µm)")
                 ax.set_ylabel("y (µm)")
+                _scale_bar(ax, float(x[-1] - x[0]))
             if col == 1:
                 fig.colorbar(im, ax=ax_p, label="p (MPa)", shrink=0.8)
     handles = [Patch(facecolor=col, edgecolor="k", label=name)
@@ -154,4 +177,105 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
             fig.savefig(path, dpi=130)
             written.append(path)
         plt.close(fig)
+    return written
+
+
+# --- sweeps ------------------------------------------------------------------------------------
+_BEHAVIOUR_COLOURS = {"stick": "#4c72b0", "roll_upper": "#dd8452", "roll_lower": "#c44e52",
+                      "rotate": "#55a868", "failed": "0.35", "error": "black", "missing": "white"}
+
+
+def _axis_label(ds, name: str) -> str:
+    units = ds[name].attrs.get("units", "")
+    key = ds[name].attrs.get("config_key", name)
+    return f"{key} ({units})" if units and units != "1" else key
+
+
+def state_map(summary, x: str | None = None, y: str | None = None):
+    """The sweep's behaviour map: per case, the behaviour (colour: stick, roll about the upper
+    or lower interface, rotate, failed) with the total rotation (degrees) written in the cell,
+    and the normal force (N) at the first turn. ``x``, ``y``: sweep dimensions (default the
+    first two); further dimensions become rows of panels (at most six)."""
+    plt = _plt()
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    dims = [d for d in summary.behaviour.dims]
+    if not dims:
+        raise ValueError("the summary has no sweep dimension")
+    x = x or dims[0]
+    y = y or (next((d for d in dims if d != x), None))
+    for name in (x, y):
+        if name is not None and name not in dims:
+            raise ValueError(f"{name!r} is not a sweep dimension; choose from {dims}")
+    rest = [d for d in dims if d not in (x, y)]
+    combos = list(itertools_product(*[range(summary.sizes[d]) for d in rest]))[:6]
+    meanings = summary.behaviour.attrs["flag_meanings"].split()
+    cmap = ListedColormap([_BEHAVIOUR_COLOURS[m] for m in meanings])
+    fig, axes = plt.subplots(len(combos), 2, figsize=(11, 4.2 * len(combos) + 0.4),
+                             squeeze=False, constrained_layout=True)
+    force_max = float(np.nanmax(summary.first_turn_force.values, initial=0.0))
+    for row, combo in enumerate(combos):
+        sel = {d: i for d, i in zip(rest, combo, strict=True)}
+        part = summary.isel(sel)
+        where = ", ".join(f"{d} = {summary[d].values[i]}" for d, i in sel.items())
+        order = (y, x) if y else (x,)
+        behaviour = part.behaviour.transpose(*order).values.reshape(-1, part.sizes[x])
+        rotation = part.total_rotation.transpose(*order).values.reshape(behaviour.shape)
+        force = part.first_turn_force.transpose(*order).values.reshape(behaviour.shape)
+        ax_b, ax_f = axes[row]
+        ax_b.imshow(behaviour, origin="lower", cmap=cmap, vmin=-0.5, vmax=len(meanings) - 0.5,
+                    aspect="auto", interpolation="nearest")
+        for (i, j), rot in np.ndenumerate(rotation):
+            if rot == rot:
+                colour = "black" if meanings[behaviour[i, j]] == "missing" else "white"
+                ax_b.text(j, i, f"{rot:+.1f}°", ha="center", va="center", fontsize=7,
+                          color=colour)
+        masked = np.ma.masked_invalid(force)
+        ax_f.set_facecolor("0.88")
+        im = ax_f.imshow(masked, origin="lower", cmap="magma_r", aspect="auto",
+                         interpolation="nearest", vmin=0, vmax=force_max or 1.0)
+        fig.colorbar(im, ax=ax_f, label="normal force at the first turn (N)", shrink=0.85)
+        for (i, j), f in np.ndenumerate(force):
+            if f == f:
+                dark = f > 0.5 * (force_max or 1.0)
+                ax_f.text(j, i, f"{f:.3g} N", ha="center", va="center", fontsize=7,
+                          color="white" if dark else "black")
+        ax_b.set_title("behaviour, total rotation" + (f" ({where})" if where else ""),
+                       fontsize=9)
+        ax_f.set_title("first turn (grey: never turned)" + (f" ({where})" if where else ""),
+                       fontsize=9)
+        for ax in (ax_b, ax_f):
+            ax.set_xticks(range(summary.sizes[x]), [f"{v:g}" if isinstance(v, float) else str(v)
+                                                    for v in summary[x].values.tolist()])
+            ax.set_xlabel(_axis_label(summary, x))
+            if y:
+                ax.set_yticks(range(summary.sizes[y]),
+                              [f"{v:g}" if isinstance(v, float) else str(v)
+                               for v in summary[y].values.tolist()])
+                ax.set_ylabel(_axis_label(summary, y))
+            else:
+                ax.set_yticks([])
+    present = sorted(set(np.asarray(summary.behaviour.values).ravel().tolist()))
+    handles = [Patch(facecolor=_BEHAVIOUR_COLOURS[meanings[k]], edgecolor="k",
+                     label=meanings[k].replace("_", " ")) for k in present]
+    fig.legend(handles=handles, loc="outside lower center", ncols=len(handles), fontsize=8)
+    fig.suptitle(f"thirdbody sweep: {summary.attrs.get('cases', '?')} cases, "
+                 f"{summary.attrs.get('failed', 0)} not complete", fontsize=10)
+    return fig
+
+
+def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
+                   ) -> list[Path]:
+    """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``."""
+    plt = _plt()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    fig = state_map(summary)
+    written = []
+    for fmt in formats:
+        path = out / f"state_map.{fmt}"
+        fig.savefig(path, dpi=130)
+        written.append(path)
+    plt.close(fig)
     return written

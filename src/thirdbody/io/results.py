@@ -44,9 +44,9 @@ def open_results(path: str | Path):
 
 
 def run_to_file(sim, path: str | Path, *, resume: bool = False,
-                progress: Callable | None = None):
+                progress: Callable | None = None, attrs: dict | None = None):
     """Run ``sim``, writing ``path`` after every step; with ``resume`` continue the run saved
-    there. Returns the final dataset."""
+    there. ``attrs`` are added to the file's global attributes. Returns the final dataset."""
     path = Path(path)
     blob = None
     if resume:
@@ -58,9 +58,11 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
                              "nothing to resume")
         blob = saved[RESUME_VARIABLE].values.tobytes()
 
-    def checkpoint(simulation, state) -> None:
-        write_results(simulation.dataset(), path, simulation.snapshot(state))
+    extra = dict(attrs or {})
 
-    ds = sim.run(progress=progress, checkpoint=checkpoint, resume_from=blob)
+    def checkpoint(simulation, state) -> None:
+        write_results(simulation.dataset().assign_attrs(extra), path, simulation.snapshot(state))
+
+    ds = sim.run(progress=progress, checkpoint=checkpoint, resume_from=blob).assign_attrs(extra)
     write_results(ds, path)
     return ds

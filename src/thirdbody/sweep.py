@@ -1,0 +1,677 @@
+"""Parameter sweeps: the Cartesian product of configuration values, run on dask.distributed.
+
+A sweep file (TOML) names a base configuration and the axes to vary::
+
+    base = "fig4a"                  # a config file (relative to this file) or a bundled example
+
+    [axes]                          # any configuration key, dotted; a list or a range
+    "plates.mu" = [0.2, 0.3, 0.4]   # plates.mu sets both plates (mu_up = mu_low)
+    "particle.orientation_deg" = {start = -60, stop = 60, num = 5}     # inclusive linspace
+    "particle.seed" = {start = 1, stop = 4, step = 1}                  # inclusive range
+
+    [set]                           # optional: keys overridden on every case
+    "load.steps" = 15
+    "numerics.maps_every" = 0
+
+Every case is checked like a configuration file before anything runs (:class:`SweepError` names
+the case and the key). A case is identified by the hash of its resolved configuration and writes
+``OUT/cases/<hash>.nc`` (the inputs, the resolved configuration and the sweep values are stored
+in its attributes). Rerunning a sweep skips the cases already finished, resumes the ones a
+killed worker left half done, and retries the ones that raised. A case that raises records its
+traceback in ``OUT/cases/<hash>.error.txt``; the others go on. At the end the per-case
+summaries, and the per-step scalars when every case has the same number of steps, are combined
+along the sweep axes into ``OUT/summary.nc`` (and ``OUT/summary.csv``, one row per case), and
+``OUT/state_map.png`` shows the behaviour and the total rotation over the first two axes.
+
+The cases run as tasks on a :class:`dask.distributed.Client`: by default a ``LocalCluster`` of
+single-threaded worker processes on this machine, or any existing cluster (``scheduler`` address).
+Workers of a remote cluster need thirdbody installed and must see ``OUT`` (a shared file
+system). A worker that dies has its task rescheduled by dask (up to
+``distributed.scheduler.allowed-failures`` times, 3 by default); the new attempt resumes from
+the steps the dead one wrote.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+import tomllib
+import traceback
+import warnings
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .io.config import Config, ConfigError, parse_config
+from .io.results import RESUME_VARIABLE, run_to_file, write_results
+
+__all__ = [
+    "BEHAVIOURS",
+    "Axis",
+    "Case",
+    "Sweep",
+    "SweepError",
+    "SweepReport",
+    "load_sweep",
+    "run_case",
+    "run_sweep",
+    "summarize",
+]
+
+#: Behaviour of a case over its whole run (``behaviour`` in the summary): ``stick`` if it never
+#: turned, else the state of its first turning step; ``failed`` if a step failed, ``error`` if
+#: the case raised, ``missing`` if it has no result.
+BEHAVIOURS = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "error", "missing")
+_BEHAVIOUR_CODE = {name: i for i, name in enumerate(BEHAVIOURS)}
+
+#: Per-step variables copied into the summary (when every case has the same step count).
+STEP_VARIABLES = ("normal_force", "compression", "orientation", "state", "ratio_up",
+                  "ratio_low", "position_x")
+
+#: Units of the configuration keys one is likely to sweep (coordinate attributes).
+_KEY_UNITS = {
+    "plates.mu": "1", "plates.mu_up": "1", "plates.mu_low": "1",
+    "particle.orientation_deg": "degree", "particle.E": "Pa", "particle.nu": "1",
+    "particle.radius": "m", "particle.semi_axes": "m", "particle.amplitude": "1",
+    "particle.seed": "1", "particle.n_waves": "1", "load.stop": "N", "load.hold": "N",
+    "numerics.resolution": "cells per particle size",
+}
+
+
+class SweepError(ValueError):
+    """An invalid sweep file: the message names the key (and the case) at fault."""
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One sweep axis: a dotted configuration key and its values."""
+
+    key: str
+    values: tuple
+    name: str                 # the summary dimension's name
+
+    @property
+    def units(self) -> str:
+        return _KEY_UNITS.get(self.key, "")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One point of the sweep: its axis indices and values, and its resolved configuration."""
+
+    index: tuple[int, ...]
+    values: dict[str, Any]
+    data: dict                # the raw configuration (TOML tables) of this case
+    config: Config
+    case_id: str              # hash of the resolved configuration
+
+    @property
+    def filename(self) -> str:
+        return f"{self.case_id}.nc"
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A base configuration, keys set on every case, and the axes of the Cartesian product."""
+
+    base: dict
+    axes: tuple[Axis, ...]
+    overrides: dict = field(default_factory=dict)
+    base_dir: str = "."
+    source: str = "<sweep>"
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(len(a.values) for a in self.axes)
+
+    def cases(self) -> list[Case]:
+        """Every case, in axis order (the first axis varies slowest), each one validated.
+
+        Raises :class:`SweepError` listing the cases whose configuration is invalid.
+        """
+        cases, problems = [], []
+        base = _deep_copy(self.base)
+        for key, value in self.overrides.items():
+            _set_key(base, key, value)
+        ranges = [range(len(a.values)) for a in self.axes]
+        for index in itertools.product(*ranges):
+            values = {a.key: a.values[i] for a, i in zip(self.axes, index, strict=True)}
+            data = _deep_copy(base)
+            for key, value in values.items():
+                _set_key(data, key, value)
+            label = ", ".join(f"{k} = {v!r}" for k, v in values.items()) or "the base"
+            try:
+                config = parse_config(data, source=f"{self.source} (case {label})",
+                                      base_dir=self.base_dir)
+            except ConfigError as exc:
+                problems.append(str(exc))
+                continue
+            cases.append(Case(index, values, data, config, case_id(config)))
+        if problems:
+            shown = problems[:5] + ([f"... and {len(problems) - 5} more"]
+                                    if len(problems) > 5 else [])
+            raise SweepError("\n".join(shown))
+        return cases
+
+    def to_toml(self) -> str:
+        """The sweep as TOML (base inline), to store next to the results."""
+        def value(v) -> str:
+            return json.dumps(list(v) if isinstance(v, tuple) else v)
+
+        lines = ["# thirdbody sweep (resolved)", ""]
+        lines += ["[axes]"] + [f'"{a.key}" = {value(list(a.values))}' for a in self.axes]
+        if self.overrides:
+            lines += ["", "[set]"] + [f'"{k}" = {value(v)}' for k, v in self.overrides.items()]
+        for table, entries in self.base.items():
+            lines += ["", f"[base.{table}]"]
+            lines += [f"{k} = {value(v)}" for k, v in entries.items()]
+        return "\n".join(lines) + "\n"
+
+
+def case_id(config: Config) -> str:
+    """16 hex digits of the SHA-256 of the resolved configuration (canonical JSON)."""
+    text = json.dumps(config.model_dump(mode="json", exclude={"base_dir"}), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+# --- reading a sweep file --------------------------------------------------------------------
+def load_sweep(path: str | Path) -> Sweep:
+    """Read and check a sweep file (see the module docstring); :class:`SweepError` on problems."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise SweepError(f"cannot read sweep file {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise SweepError(f"sweep file {path} is not valid TOML: {exc}") from None
+    return parse_sweep(data, base_dir=path.parent, source=str(path))
+
+
+def parse_sweep(data: dict, base_dir: str | Path = ".", source: str = "<sweep>") -> Sweep:
+    """Build a :class:`Sweep` from the tables of a sweep file."""
+    unknown = sorted(set(data) - {"base", "axes", "set"})
+    if unknown:
+        raise SweepError(f"{source}: unknown key(s) {', '.join(unknown)} (allowed: base, axes, "
+                         "set)")
+    if "base" not in data:
+        raise SweepError(f"{source}: base: required (a configuration file, a bundled example "
+                         "name, or a [base] table)")
+    base, base_dir = _load_base(data["base"], Path(base_dir), source)
+    raw_axes = data.get("axes")
+    if not isinstance(raw_axes, dict) or not raw_axes:
+        raise SweepError(f"{source}: axes: required, a table of 'key = [values]' or "
+                         "'key = {start, stop, num | step}'")
+    flat = _flatten(raw_axes, is_leaf=lambda v: isinstance(v, list) or _is_range(v))
+    overrides = _flatten(data.get("set", {}), is_leaf=lambda v: not isinstance(v, dict))
+    axes = []
+    for key, spec in flat.items():
+        values = _axis_values(key, spec, source)
+        if len(set(map(repr, values))) != len(values):
+            raise SweepError(f"{source}: axes.{key}: repeated values {values!r}")
+        axes.append(values)
+    names = [k.rsplit(".", 1)[-1] for k in flat]
+    names = [n if names.count(n) == 1 else k.replace(".", "_")
+             for n, k in zip(names, flat, strict=True)]
+    sweep = Sweep(base=base, overrides=overrides, base_dir=str(base_dir), source=source,
+                  axes=tuple(Axis(k, tuple(v), n)
+                             for (k, v, n) in zip(flat, axes, names, strict=True)))
+    both = [k for k in flat if k in overrides]
+    if both:
+        raise SweepError(f"{source}: {', '.join(both)}: both an axis and in [set]")
+    return sweep
+
+
+def _load_base(spec, sweep_dir: Path, source: str) -> tuple[dict, Path]:
+    if isinstance(spec, dict):
+        return spec, sweep_dir
+    if not isinstance(spec, str):
+        raise SweepError(f"{source}: base: a file name, an example name or a table; got "
+                         f"{spec!r}")
+    candidates = [sweep_dir / spec, sweep_dir / f"{spec}.toml"]
+    bundled = resources.files("thirdbody") / "examples"
+    candidates += [Path(str(bundled / spec)), Path(str(bundled / f"{spec}.toml"))]
+    for path in candidates:
+        if path.is_file():
+            try:
+                return tomllib.loads(path.read_text()), path.parent
+            except tomllib.TOMLDecodeError as exc:
+                raise SweepError(f"{source}: base {path} is not valid TOML: {exc}") from None
+    raise SweepError(f"{source}: base: no file {spec!r} next to the sweep file and no bundled "
+                     "example of that name (see `thirdbody examples`)")
+
+
+def _is_range(v) -> bool:
+    return isinstance(v, dict) and {"start", "stop"} <= set(v) and set(v) <= {
+        "start", "stop", "num", "step"}
+
+
+def _flatten(table: dict, is_leaf: Callable, prefix: str = "") -> dict:
+    out = {}
+    for k, v in table.items():
+        key = f"{prefix}{k}"
+        if is_leaf(v) or not isinstance(v, dict):
+            out[key] = v
+        else:
+            out.update(_flatten(v, is_leaf, key + "."))
+    return out
+
+
+def _axis_values(key: str, spec, source: str) -> list:
+    where = f"{source}: axes.{key}"
+    if isinstance(spec, list):
+        if not spec:
+            raise SweepError(f"{where}: an empty list")
+        return spec
+    if not _is_range(spec):
+        raise SweepError(f"{where}: a list of values or {{start, stop, num}} / "
+                         f"{{start, stop, step}}; got {spec!r}")
+    start, stop = spec["start"], spec["stop"]
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in (start, stop)):
+        raise SweepError(f"{where}: start and stop must be numbers; got {spec!r}")
+    if ("num" in spec) == ("step" in spec):
+        raise SweepError(f"{where}: give exactly one of num and step; got {spec!r}")
+    if "num" in spec:
+        num = spec["num"]
+        if not isinstance(num, int) or num < 1:
+            raise SweepError(f"{where}.num: an integer >= 1; got {num!r}")
+        values = np.linspace(start, stop, num) if num > 1 else np.array([start])
+    else:
+        step = spec["step"]
+        if not isinstance(step, int | float) or step == 0 or (stop - start) * step < 0:
+            raise SweepError(f"{where}.step: a non-zero number going from start towards stop; "
+                             f"got {step!r}")
+        count = math.floor((stop - start) / step * (1 + 1e-12) + 1e-9) + 1
+        values = start + step * np.arange(count)
+    if all(isinstance(v, int) for v in (start, stop, spec.get("step", 1))) and "num" not in spec:
+        return [int(v) for v in values]
+    return [float(f"{v:.12g}") for v in values]
+
+
+def _set_key(data: dict, key: str, value) -> None:
+    """Set a dotted key in the raw configuration tables; ``plates.mu`` sets both plates."""
+    *tables, leaf = key.split(".")
+    node = data
+    for t in tables:
+        node = node.setdefault(t, {})
+        if not isinstance(node, dict):
+            raise SweepError(f"{key}: {t} is not a table")
+    if key == "plates.mu":
+        node.pop("mu_low", None)
+        node["mu_up"] = value
+        return
+    node[leaf] = list(value) if isinstance(value, tuple) else value
+
+
+def _deep_copy(data: dict) -> dict:
+    return json.loads(json.dumps(data))
+
+
+# --- one case (runs on a worker) -------------------------------------------------------------
+def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
+             sweep_values: dict | None = None, fft_threads: int = 1) -> dict:
+    """Run one case to ``cases_dir/<case_id>.nc``; never raises for a failing case.
+
+    Resumes the file a killed attempt left behind. Returns a small record: ``case``,
+    ``status`` (``complete``, ``failed: ...`` for a run stopped by a failed step, or
+    ``error: ...`` when the case raised, its traceback written to ``<case_id>.error.txt``),
+    ``steps``, ``elapsed`` (s), ``resumed`` and ``worker`` (host:pid).
+    """
+    from . import Simulation, set_workers
+
+    path = Path(cases_dir) / f"{case_id}.nc"
+    error_path = path.with_suffix(".error.txt")
+    record = {"case": case_id, "worker": f"{os.uname().nodename}:{os.getpid()}",
+              "resumed": False, "steps": 0, "elapsed": 0.0}
+    start = time.perf_counter()
+    try:
+        set_workers(fft_threads)
+        done = _case_status(path)
+        if done is not None:
+            return {**record, "status": done, "skipped": True}
+        config = parse_config(data, source=f"case {case_id}", base_dir=base_dir)
+        particle, plates, load, numerics = config.build()
+        sim = Simulation(particle, plates, load, **numerics)
+        resume = path.exists()
+        if not resume:
+            sim.preflight()
+        attrs = {"config": config.to_toml(), "sweep_case": case_id,
+                 "sweep_values": json.dumps(sweep_values or {})}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            ds = run_to_file(sim, path, resume=resume, attrs=attrs)
+        error_path.unlink(missing_ok=True)
+        return {**record, "status": sim.status, "steps": int(ds.sizes.get("step", 0)),
+                "resumed": resume, "elapsed": time.perf_counter() - start}
+    except Exception as exc:                    # recorded; the sweep goes on
+        message = f"error: {type(exc).__name__}: {exc}"
+        tmp = error_path.with_name(error_path.name + ".tmp")
+        tmp.write_text(f"{message}\n\n{traceback.format_exc()}")
+        os.replace(tmp, error_path)
+        return {**record, "status": message, "elapsed": time.perf_counter() - start}
+
+
+def _case_status(path: Path) -> str | None:
+    """The status of a finished case file, or None (absent, partial or unreadable)."""
+    case = _read_case(path, ())
+    if case is None or case.partial:
+        return None
+    return case.status
+
+
+@dataclass
+class _CaseData:
+    status: str
+    partial: bool                       # holds a resume state: the run is not finished
+    arrays: dict[str, np.ndarray]
+    attrs: dict[str, dict]
+
+
+_KEPT_ATTRS = ("units", "long_name", "flag_values", "flag_meanings")
+
+
+def _read_case(path: Path, names: Iterable[str]) -> _CaseData | None:
+    """Read a case file's status and the per-step variables ``names`` straight through h5py
+    (ten times faster than xarray for the summary). An unreadable file is removed: the case
+    then starts afresh."""
+    import h5py
+
+    if not path.exists():
+        return None
+    try:
+        with h5py.File(path, "r") as f:
+            arrays, attrs = {}, {}
+            for name in names:
+                if name in f:
+                    arrays[name] = f[name][()]
+                    attrs[name] = {k: _text(v) for k, v in f[name].attrs.items()
+                                   if k in _KEPT_ATTRS}
+            return _CaseData(_text(f.attrs.get("status", "complete")), RESUME_VARIABLE in f,
+                             arrays, attrs)
+    except OSError:
+        path.unlink()
+        return None
+
+
+def _text(value):
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.ndarray) and value.dtype.kind in "SO":
+        return " ".join(_text(v) for v in value)
+    return value
+
+
+# --- the driver ------------------------------------------------------------------------------
+@dataclass
+class SweepReport:
+    """What a sweep did: ``records`` by case id (the run_case records, with ``skipped`` for the
+    cases already finished), and the summary dataset."""
+
+    out: Path
+    cases: list[Case]
+    records: dict[str, dict]
+    summary: Any
+    elapsed: float
+    figures: list[Path] = field(default_factory=list)
+
+    @property
+    def computed(self) -> int:
+        return sum(not r.get("skipped") for r in self.records.values())
+
+    @property
+    def skipped(self) -> int:
+        return sum(bool(r.get("skipped")) for r in self.records.values())
+
+    @property
+    def failures(self) -> dict[str, str]:
+        """Case id → status, for every case that did not complete."""
+        return {k: r["status"] for k, r in self.records.items() if r["status"] != "complete"}
+
+
+def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | None = None,
+              workers: int | None = None, plots: bool = True,
+              progress: Callable[[dict, int, int], None] | None = None) -> SweepReport:
+    """Run every case of ``sweep`` that is not finished in ``out``, then summarise.
+
+    ``client``: an existing :class:`dask.distributed.Client` (left open); else ``scheduler``
+    (``tcp://host:port`` of a running cluster); else a LocalCluster of ``workers`` single-threaded
+    processes (default: the number of cores), closed at the end. ``progress(record, done,
+    total)`` is called after every case. Raises :class:`SweepError` (before writing anything)
+    for an invalid sweep.
+    """
+    start = time.perf_counter()
+    cases = sweep.cases()
+    out = Path(out)
+    cases_dir = out / "cases"
+    cases_dir.mkdir(parents=True, exist_ok=True)
+    (out / "sweep.toml").write_text(sweep.to_toml())
+    records: dict[str, dict] = {}
+    todo = []
+    for case in cases:
+        status = _case_status(cases_dir / case.filename)
+        if status is None:
+            todo.append(case)
+        else:
+            records[case.case_id] = {"case": case.case_id, "status": status, "skipped": True}
+    total = len(cases)
+    if progress:
+        for r in list(records.values()):
+            progress(r, len(records), total)
+    if todo:
+        _run_tasks(todo, cases_dir, records, total, client, scheduler, workers, progress,
+                   base_dir=sweep.base_dir)
+    summary = summarize(sweep, out, cases, records)
+    figures = []
+    if plots:
+        from .plot import save_state_map
+
+        figures = save_state_map(summary, out)
+    return SweepReport(out, cases, records, summary, time.perf_counter() - start, figures)
+
+
+def _run_tasks(todo: list[Case], cases_dir: Path, records: dict, total: int, client,
+               scheduler, workers, progress, base_dir: str) -> None:
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    own_client = client is None
+    cluster = None
+    if own_client:
+        if scheduler:
+            client = Client(scheduler, timeout="30s")
+        else:
+            import logging
+
+            cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1,
+                                   threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=":0", silence_logs=logging.ERROR)
+            client = Client(cluster)
+    try:
+        futures = {}
+        for case in todo:
+            fut = client.submit(run_case, case.data, base_dir, str(cases_dir.resolve()),
+                                case.case_id, sweep_values=case.values,
+                                key=f"thirdbody-case-{case.case_id}", pure=False)
+            futures[fut] = case
+        for fut in as_completed(futures):
+            case = futures[fut]
+            if fut.status == "finished":
+                record = fut.result()
+            else:                               # e.g. KilledWorker after repeated deaths
+                exc = fut.exception()
+                record = {"case": case.case_id,
+                          "status": f"error: {type(exc).__name__}: {exc}"}
+                (cases_dir / f"{case.case_id}.error.txt").write_text(record["status"] + "\n")
+            records[case.case_id] = record
+            if progress:
+                progress(record, len(records), total)
+    finally:
+        if own_client:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+
+
+# --- the summary -----------------------------------------------------------------------------
+_SUMMARY_INPUTS = ("turned", "state", "orientation", "ratio_up", "ratio_low", "compression",
+                   "normal_force", "time_total")
+
+
+def _case_summary(case: _CaseData, theta0: float) -> dict:
+    """Scalar summaries of one case's per-step results."""
+    from .simulation import STATES
+
+    nan = math.nan
+    a = case.arrays
+    n = len(a.get("state", ()))
+    out = {"steps_done": n, "total_rotation": nan, "first_turn_force": nan,
+           "first_turn_compression": nan, "turning_steps": 0, "final_state": -1,
+           "final_ratio_up": nan, "final_ratio_low": nan, "final_compression": nan,
+           "behaviour": _BEHAVIOUR_CODE["failed"], "compute_time": 0.0}
+    if n == 0:
+        return out
+    turned = np.flatnonzero(a["turned"].astype(bool))
+    state = a["state"]
+    out.update(total_rotation=float(a["orientation"][-1] - theta0),
+               turning_steps=int(turned.size), final_state=int(state[-1]),
+               final_ratio_up=float(a["ratio_up"][-1]),
+               final_ratio_low=float(a["ratio_low"][-1]),
+               final_compression=float(a["compression"][-1]),
+               compute_time=float(np.sum(a["time_total"])))
+    if turned.size:
+        k = turned[0]
+        out.update(first_turn_force=float(a["normal_force"][k]),
+                   first_turn_compression=float(a["compression"][k]))
+    if case.status == "complete" and not case.partial:
+        first = STATES[int(state[turned[0]])] if turned.size else "stick"
+        out["behaviour"] = _BEHAVIOUR_CODE.get(first, _BEHAVIOUR_CODE["failed"])
+    return out
+
+
+_SUMMARY_VARIABLES = {
+    "behaviour": ("1", "behaviour over the run: " + ", ".join(BEHAVIOURS)),
+    "total_rotation": ("degree", "final orientation minus the initial one"),
+    "first_turn_force": ("N", "normal force at the first turning step (NaN: never turned)"),
+    "first_turn_compression": ("1", "compression at the first turning step"),
+    "turning_steps": ("1", "number of steps in which the particle turned"),
+    "final_state": ("1", "state at the last step done (-1: none)"),
+    "final_ratio_up": ("1", "F_T/(mu_up F_N) at the last step"),
+    "final_ratio_low": ("1", "F_T/(mu_low F_N) at the last step"),
+    "final_compression": ("1", "compression (d0 - h)/d0 at the last step"),
+    "steps_done": ("1", "load steps completed"),
+    "compute_time": ("s", "wall time of the case's load steps (sum of time_total)"),
+}
+
+
+def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
+              records: dict[str, dict] | None = None):
+    """Combine the finished cases in ``out/cases`` along the sweep axes: writes
+    ``out/summary.nc`` and ``out/summary.csv`` and returns the dataset."""
+    import xarray as xr
+
+    from .simulation import STATES
+
+    out = Path(out)
+    cases = cases if cases is not None else sweep.cases()
+    records = records or {}
+    shape = sweep.shape
+    dims = tuple(a.name for a in sweep.axes)
+    scalars = {name: np.full(shape, np.nan) for name in _SUMMARY_VARIABLES}
+    status = np.full(shape, "missing", dtype=object)
+    ids = np.full(shape, "", dtype=object)
+    datasets = {}
+    rows = []
+    for case in cases:
+        rec = records.get(case.case_id, {})
+        path = out / "cases" / case.filename
+        ids[case.index] = case.case_id
+        summ = {}
+        data_ = _read_case(path, {*_SUMMARY_INPUTS, *STEP_VARIABLES})
+        if data_ is not None:
+            summ = _case_summary(data_, float(case.config.particle.orientation_deg))
+            if data_.partial:
+                summ["behaviour"] = _BEHAVIOUR_CODE["missing"]
+                status[case.index] = "incomplete"
+            else:
+                status[case.index] = data_.status
+            datasets[case.index] = data_
+        else:
+            summ = {"behaviour": _BEHAVIOUR_CODE["missing"]}
+        if str(rec.get("status", "")).startswith("error"):
+            status[case.index] = rec["status"]
+            summ["behaviour"] = _BEHAVIOUR_CODE["error"]
+        for name, value in summ.items():
+            scalars[name][case.index] = value
+        rows.append({**{a.key: case.values[a.key] for a in sweep.axes}, "case": case.case_id,
+                     "status": status[case.index],
+                     **{k: summ.get(k, math.nan) for k in _SUMMARY_VARIABLES}})
+    data = {}
+    for name, (units, long_name) in _SUMMARY_VARIABLES.items():
+        values = scalars[name]
+        attrs = {"units": units, "long_name": long_name}
+        if name == "behaviour":
+            values = values.astype(np.int8)
+            attrs.update(flag_values=np.arange(len(BEHAVIOURS), dtype=np.int8),
+                         flag_meanings=" ".join(BEHAVIOURS))
+        elif name == "final_state":
+            values = np.nan_to_num(values, nan=-1).astype(np.int8)
+            attrs.update(flag_values=np.arange(len(STATES), dtype=np.int8),
+                         flag_meanings=" ".join(STATES))
+        elif name in ("turning_steps", "steps_done"):
+            values = np.nan_to_num(values, nan=0).astype(np.int32)
+        data[name] = (dims, values, attrs)
+    data["status"] = (dims, status.astype(str), {"long_name": "case status"})
+    data["case"] = (dims, ids.astype(str), {"long_name": "case id: file cases/<case>.nc"})
+    coords = {a.name: (a.name, _coord(a.values), {"config_key": a.key, "units": a.units})
+              for a in sweep.axes}
+    complete = {len(d.arrays["state"]) for d in datasets.values()
+                if d.status == "complete" and not d.partial}
+    if len(complete) == 1:                      # per-step scalars share one step axis
+        n_steps = complete.pop()
+        coords["step"] = ("step", np.arange(n_steps), {"long_name": "load step index"})
+        for name in STEP_VARIABLES:
+            arr = np.full((*shape, n_steps), np.nan)
+            attrs = {}
+            for index, d in datasets.items():
+                values = d.arrays[name][:n_steps]
+                arr[index][:len(values)] = values
+                attrs = d.attrs[name]
+            if name == "state":
+                arr = np.nan_to_num(arr, nan=-1).astype(np.int8)
+            data[name] = ((*dims, "step"), arr, attrs)
+    from ._version import __version__
+
+    summary = xr.Dataset(data, coords=coords, attrs={
+        "title": "thirdbody sweep summary", "thirdbody_version": __version__,
+        "sweep": sweep.to_toml(), "cases": len(cases),
+        "failed": int(sum(1 for s in status.flat if s != "complete"))})
+    write_results(summary, out / "summary.nc")
+    _write_csv(out / "summary.csv", rows)
+    return summary
+
+
+def _coord(values: Iterable) -> np.ndarray:
+    values = list(values)
+    if all(isinstance(v, int | float) and not isinstance(v, bool) for v in values):
+        return np.asarray(values)
+    return np.asarray([json.dumps(v) if not isinstance(v, str) else v for v in values])
+
+
+def _write_csv(path: Path, rows: list[dict]) -> None:
+    if not rows:
+        return
+    tmp = path.with_name(path.name + ".tmp")
+    with tmp.open("w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: BEHAVIOURS[int(v)] if k == "behaviour" and v == v else v
+                             for k, v in row.items()})
+    os.replace(tmp, path)
