@@ -1,13 +1,15 @@
 # Quick start:  `make demo`  (sets up .venv, runs the paper's Fig. 3 particle simulation, plots in out/fig3)
 #               `make test`  (sets up .venv, runs ruff and the whole test suite)
 # More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
-#               `make bench`, `make bench-tangential`, `make bench-simulation`
+#               `make sweep` (a 20-case sweep on a local dask cluster),
+#               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo hertz fig2 fig3 fig4 fig5 test test-fast lint bench bench-tangential bench-simulation clean venv
+.PHONY: demo hertz fig2 fig3 fig4 fig5 sweep test test-fast lint bench bench-tangential \
+	bench-simulation bench-sweep clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -37,6 +39,9 @@ fig3 fig4 fig5: $(VENV)/.installed-test
 fig2: $(VENV)/.installed-test
 	$(BIN)/python examples/fig2_partial_slip.py --out $(OUT)/fig2
 
+sweep: $(VENV)/.installed-test
+	$(BIN)/thirdbody sweep src/thirdbody/examples/sweep_fig4.toml -o $(OUT)/sweep_fig4
+
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples
 	$(BIN)/python -m pytest
@@ -55,6 +60,9 @@ bench-tangential: $(VENV)/.installed-bench
 
 bench-simulation: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/simulation_fig3.py
+
+bench-sweep: $(VENV)/.installed-test
+	$(BIN)/python benchmarks/sweep_throughput.py --md benchmarks/results/sweep_throughput.md
 
 clean:
 	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache

@@ -168,6 +168,15 @@ def test_cli_refuses_a_bad_sweep_with_exit_2_and_writes_nothing(tmp_path):
     assert result.exit_code == 2 and "--workers" in result.output
 
 
+def test_cli_unreachable_scheduler_exits_2_and_writes_nothing(tmp_path):
+    path = write_sweep(tmp_path / "in")
+    result = runner.invoke(app, ["sweep", str(path), "-o", str(tmp_path / "out"), "--scheduler",
+                                 "tcp://127.0.0.1:9", "--connect-timeout", "1"])
+    assert result.exit_code == 2
+    assert "cannot reach the Dask scheduler tcp://127.0.0.1:9" in result.output
+    assert not (tmp_path / "out").exists()
+
+
 def test_cli_dry_run_lists_the_cases(tmp_path):
     path = write_sweep(tmp_path / "in")
     result = runner.invoke(app, ["sweep", str(path), "-o", str(tmp_path / "out"), "--dry-run"])

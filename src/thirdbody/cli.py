@@ -122,6 +122,8 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
           dry_run: Annotated[bool, typer.Option(
               "--dry-run", help="list the cases (and which are done) and exit")] = False,
           plots: Annotated[bool, typer.Option(help="write the state map at the end")] = True,
+          connect_timeout: Annotated[float, typer.Option(
+              min=0.1, help="seconds to wait for --scheduler before giving up")] = 30.0,
           ) -> None:
     """Run the Cartesian product of a sweep on dask.distributed: OUT/cases/<hash>.nc per case,
     OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases."""
@@ -165,7 +167,8 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", RuntimeWarning)
                 report = run_sweep(spec, out, scheduler=scheduler, workers=workers,
-                                   plots=plots, progress=progress)
+                                   plots=plots, progress=progress,
+                                   connect_timeout=connect_timeout)
         except KeyboardInterrupt:
             typer.echo(f"\ninterrupted: finished cases are kept in {out / 'cases'}; rerun the "
                        "same command to continue", err=True)
