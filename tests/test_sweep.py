@@ -342,3 +342,68 @@ def test_a_worker_killed_mid_sweep_does_not_stop_it(tmp_path, one_by_one):
         expected = one_by_one[case.values["plates.mu"], case.values["particle.orientation_deg"]]
         xr.testing.assert_identical(without_times(ds).drop_attrs(),
                                     without_times(expected).drop_attrs())
+
+
+# --- resuming a case in process ----------------------------------------------------------------
+def _sweep_of(tmp_path, mus):
+    return load_sweep(write_sweep(tmp_path / "in", sweep=f"""
+base = "base.toml"
+[axes]
+"plates.mu" = {list(mus)}
+[set]
+"particle.orientation_deg" = 35.0
+"load.forces" = [0.5, 0.75, 1.0]
+"""))
+
+
+def _interrupt_after_first_step(case, base_dir, path):
+    from thirdbody import Simulation
+    from thirdbody.io.config import parse_config
+    from thirdbody.io.results import run_to_file
+
+    particle, plates, load, numerics = parse_config(case.data, base_dir=base_dir).build()
+    sim = Simulation(particle, plates, load, **numerics)
+    sim.preflight()
+
+    def progress(record):
+        if record.step == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_to_file(sim, path, progress=progress)
+    assert open_results(path).sizes["step"] == 1
+
+
+def test_run_case_resumes_a_partial_file_to_the_uninterrupted_result(tmp_path):
+    from thirdbody.sweep import run_case
+
+    sweep = _sweep_of(tmp_path, [0.6])
+    case = sweep.cases()[0]
+    fresh, partial = tmp_path / "fresh", tmp_path / "partial"
+    fresh.mkdir()
+    partial.mkdir()
+    record = run_case(case.data, sweep.base_dir, str(fresh), case.case_id)
+    assert record["status"] == "complete" and not record["resumed"]
+    _interrupt_after_first_step(case, sweep.base_dir, partial / case.filename)
+    record = run_case(case.data, sweep.base_dir, str(partial), case.case_id)
+    assert record["status"] == "complete" and record["resumed"] and record["steps"] == 3
+    xr.testing.assert_identical(without_times(open_results(partial / case.filename)),
+                                without_times(open_results(fresh / case.filename)))
+
+
+def test_run_case_restarts_a_partial_file_it_cannot_continue(tmp_path):
+    """A partial file whose inputs differ (another version, another case) is not resumed: the
+    case starts afresh and ends as an uninterrupted run."""
+    from thirdbody.sweep import run_case
+
+    sweep = _sweep_of(tmp_path, [0.5, 0.6])
+    other, case = sweep.cases()
+    fresh, partial = tmp_path / "fresh", tmp_path / "partial"
+    fresh.mkdir()
+    partial.mkdir()
+    run_case(case.data, sweep.base_dir, str(fresh), case.case_id)
+    _interrupt_after_first_step(other, sweep.base_dir, partial / case.filename)
+    record = run_case(case.data, sweep.base_dir, str(partial), case.case_id)
+    assert record["status"] == "complete" and not record["resumed"]
+    xr.testing.assert_identical(without_times(open_results(partial / case.filename)),
+                                without_times(open_results(fresh / case.filename)))

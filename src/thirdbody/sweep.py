@@ -349,7 +349,18 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
                  "sweep_values": json.dumps(sweep_values or {})}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            ds = run_to_file(sim, path, resume=resume, attrs=attrs)
+            try:
+                ds = run_to_file(sim, path, resume=resume, attrs=attrs)
+            except ValueError as exc:
+                if not (resume and str(exc).startswith("cannot resume")):
+                    raise
+                # a partial file this version cannot continue (e.g. made by an older
+                # thirdbody): start the case afresh
+                path.unlink()
+                resume = False
+                sim = Simulation(particle, plates, load, **numerics)
+                sim.preflight()
+                ds = run_to_file(sim, path, attrs=attrs)
         error_path.unlink(missing_ok=True)
         return {**record, "status": sim.status, "steps": int(ds.sizes.get("step", 0)),
                 "resumed": resume, "elapsed": time.perf_counter() - start}
@@ -361,6 +372,13 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
         return {**record, "status": message, "elapsed": time.perf_counter() - start}
 
 
+#: Dask settings of the LocalCluster's workers, measured on the Fig. 4 sweep: without dask's
+#: ``MALLOC_TRIM_THRESHOLD_`` (see :func:`_relax_malloc_trim`) cases run 20-40 % faster, and
+#: without the statistical profiler (a stack sample every 10 ms) another 10-20 %. Start the
+#: workers of your own cluster with the same (README).
+LOCAL_WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+                       "distributed.worker.profile.enabled": False}
+
 _MALLOC_RELAXED = False
 
 
@@ -368,9 +386,9 @@ def _relax_malloc_trim() -> None:
     """Undo, in this worker process, the ``MALLOC_TRIM_THRESHOLD_`` that dask's nanny sets.
 
     That variable freezes glibc's adaptive mmap threshold, so every FFT-sized temporary array
-    (> 128 KiB) is mmap'ed and page-faulted afresh: measured here, 60-90 % slower cases. The
-    LocalCluster this module starts does not set it; on other clusters this raises the mmap and
-    trim thresholds with ``mallopt`` (glibc only; elsewhere nothing happens).
+    (> 128 KiB) is mmap'ed and page-faulted afresh: measured here, 20-40 % slower cases. The
+    LocalCluster this module starts does not set it; in workers of other clusters this raises
+    the mmap and trim thresholds with ``mallopt`` (glibc only; elsewhere nothing happens).
     """
     global _MALLOC_RELAXED
     if _MALLOC_RELAXED or "MALLOC_TRIM_THRESHOLD_" not in os.environ:
@@ -524,9 +542,7 @@ def _dask_client(client, scheduler: str | None, workers: int | None, needed: boo
 
     import dask
 
-    # without dask's MALLOC_TRIM_THRESHOLD_ (see _relax_malloc_trim): 40-90 % faster cases
-    no_trim = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}
-    with dask.config.set(no_trim), LocalCluster(
+    with dask.config.set(LOCAL_WORKER_CONFIG), LocalCluster(
             n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
             host="127.0.0.1", dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
             Client(cluster) as own:
