@@ -229,7 +229,8 @@ def state_map(summary, x: str | None = None, y: str | None = None):
         for (i, j), rot in np.ndenumerate(rotation):
             if rot == rot:
                 colour = "black" if meanings[behaviour[i, j]] == "missing" else "white"
-                ax_b.text(j, i, f"{rot:+.1f}°", ha="center", va="center", fontsize=7,
+                label = f"{rot:+.1f}°" if abs(rot) >= 0.05 else "0°"
+                ax_b.text(j, i, label, ha="center", va="center", fontsize=7,
                           color=colour)
         masked = np.ma.masked_invalid(force)
         ax_f.set_facecolor("0.88")
