@@ -165,11 +165,16 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
              ) -> list[Path]:
     """Write every figure for ``ds`` into ``out`` (created); returns the files written."""
     plt = _plt()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     figures = {"state": state_curve(ds, labels), "orientation": orientation_history(ds)}
     if "map_step" in ds.dims and ds.sizes["map_step"]:
         figures["contact_maps"] = contact_maps(ds, map_steps)
+    return _save_figures(plt, figures, out, formats)
+
+
+def _save_figures(plt, figures: dict, out: str | Path, formats: tuple[str, ...]) -> list[Path]:
+    """Save each figure as ``out/<name>.<format>`` (``out`` created), then close it."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     written = []
     for name, fig in figures.items():
         for fmt in formats:
@@ -269,14 +274,4 @@ def state_map(summary, x: str | None = None, y: str | None = None):
 def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
                    ) -> list[Path]:
     """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``."""
-    plt = _plt()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    fig = state_map(summary)
-    written = []
-    for fmt in formats:
-        path = out / f"state_map.{fmt}"
-        fig.savefig(path, dpi=130)
-        written.append(path)
-    plt.close(fig)
-    return written
+    return _save_figures(_plt(), {"state_map": state_map(summary)}, out, formats)
