@@ -313,6 +313,24 @@ base = "base.toml"
     assert again.computed == 1 and again.skipped == 1
 
 
+def test_cli_runs_on_an_existing_cluster_and_leaves_it_as_it_was(tmp_path, client):
+    path = write_sweep(tmp_path / "in", sweep="""
+base = "base.toml"
+[axes]
+"particle.orientation_deg" = [35.0]
+[set]
+"plates.mu" = 0.6
+""")
+    before = client.run(os.getpid)
+    result = runner.invoke(app, ["sweep", str(path), "-o", str(tmp_path / "out"), "--scheduler",
+                                 client.scheduler.address, "--no-plots"])
+    assert result.exit_code == 0, result.output
+    assert "1 cases: 1 run, 0 already done, 0 not complete" in result.output
+    assert client.run(os.getpid) == before          # same workers, still running
+    s = open_results(tmp_path / "out" / "summary.nc")
+    assert BEHAVIOURS[int(s.behaviour.sel(orientation_deg=35.0))] == "stick"
+
+
 @pytest.mark.slow
 def test_a_worker_killed_mid_sweep_does_not_stop_it(tmp_path, one_by_one):
     """SIGKILL one busy worker process after the first case completes: dask reschedules its
