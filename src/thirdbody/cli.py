@@ -168,7 +168,7 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
                 warnings.simplefilter("ignore", RuntimeWarning)
                 report = run_sweep(spec, out, scheduler=scheduler, workers=workers,
                                    plots=plots, progress=progress,
-                                   connect_timeout=connect_timeout)
+                                   connect_timeout=connect_timeout, cases=cases)
         except KeyboardInterrupt:
             typer.echo(f"\ninterrupted: finished cases are kept in {out / 'cases'}; rerun the "
                        "same command to continue", err=True)

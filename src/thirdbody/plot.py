@@ -196,6 +196,14 @@ def _axis_label(ds, name: str) -> str:
     return f"{key} ({units})" if units and units != "1" else key
 
 
+def _ticks(ds, name: str | None) -> tuple[range, list[str]]:
+    """Positions and labels of a sweep coordinate's values (none for no dimension)."""
+    if name is None:
+        return range(0), []
+    values = ds[name].values.tolist()
+    return range(len(values)), [f"{v:g}" if isinstance(v, float) else str(v) for v in values]
+
+
 def state_map(summary, x: str | None = None, y: str | None = None):
     """The sweep's behaviour map: per case, the behaviour (colour: stick, roll about the upper
     or lower interface, rotate, failed) with the total rotation (degrees) written in the cell,
@@ -252,16 +260,10 @@ def state_map(summary, x: str | None = None, y: str | None = None):
         ax_f.set_title("first turn (grey: never turned)" + (f" ({where})" if where else ""),
                        fontsize=9)
         for ax in (ax_b, ax_f):
-            ax.set_xticks(range(summary.sizes[x]), [f"{v:g}" if isinstance(v, float) else str(v)
-                                                    for v in summary[x].values.tolist()])
+            ax.set_xticks(*_ticks(summary, x))
             ax.set_xlabel(_axis_label(summary, x))
-            if y:
-                ax.set_yticks(range(summary.sizes[y]),
-                              [f"{v:g}" if isinstance(v, float) else str(v)
-                               for v in summary[y].values.tolist()])
-                ax.set_ylabel(_axis_label(summary, y))
-            else:
-                ax.set_yticks([])
+            ax.set_yticks(*_ticks(summary, y))
+            ax.set_ylabel(_axis_label(summary, y) if y else "")
     present = sorted(set(np.asarray(summary.behaviour.values).ravel().tolist()))
     handles = [Patch(facecolor=_BEHAVIOUR_COLOURS[meanings[k]], edgecolor="k",
                      label=meanings[k].replace("_", " ")) for k in present]

@@ -326,7 +326,7 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
     ``error: ...`` when the case raised, its traceback written to ``<case_id>.error.txt``),
     ``steps``, ``elapsed`` (s), ``resumed`` and ``worker`` (host:pid).
     """
-    from . import Simulation, set_workers
+    from . import Simulation, __version__, set_workers
 
     _relax_malloc_trim()
     path = Path(cases_dir) / f"{case_id}.nc"
@@ -336,31 +336,24 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
     start = time.perf_counter()
     try:
         set_workers(fft_threads)
-        done = _case_status(path)
-        if done is not None:
-            return {**record, "status": done, "skipped": True}
+        found = _read_case(path, ())
+        if found is not None and not found.partial:
+            return {**record, "status": found.status, "skipped": True}
         config = parse_config(data, source=f"case {case_id}", base_dir=base_dir)
         particle, plates, load, numerics = config.build()
         sim = Simulation(particle, plates, load, **numerics)
-        resume = path.exists()
+        # continue a partial file only if this version made it with these inputs; anything
+        # else (an older thirdbody, a foreign file) starts the case afresh
+        resume = (found is not None and found.version == __version__
+                  and found.inputs == json.dumps(sim.inputs()))
         if not resume:
+            path.unlink(missing_ok=True)
             sim.preflight()
         attrs = {"config": config.to_toml(), "sweep_case": case_id,
                  "sweep_values": json.dumps(sweep_values or {})}
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
-            try:
-                ds = run_to_file(sim, path, resume=resume, attrs=attrs)
-            except ValueError as exc:
-                if not (resume and str(exc).startswith("cannot resume")):
-                    raise
-                # a partial file this version cannot continue (e.g. made by an older
-                # thirdbody): start the case afresh
-                path.unlink()
-                resume = False
-                sim = Simulation(particle, plates, load, **numerics)
-                sim.preflight()
-                ds = run_to_file(sim, path, attrs=attrs)
+            ds = run_to_file(sim, path, resume=resume, attrs=attrs)
         error_path.unlink(missing_ok=True)
         return {**record, "status": sim.status, "steps": int(ds.sizes.get("step", 0)),
                 "resumed": resume, "elapsed": time.perf_counter() - start}
@@ -416,6 +409,8 @@ def _case_status(path: Path) -> str | None:
 class _CaseData:
     status: str
     partial: bool                       # holds a resume state: the run is not finished
+    inputs: str                         # the ``inputs`` attribute (JSON)
+    version: str                        # the thirdbody version that wrote it
     arrays: dict[str, np.ndarray]
     attrs: dict[str, dict]
 
@@ -440,7 +435,8 @@ def _read_case(path: Path, names: Iterable[str]) -> _CaseData | None:
                     attrs[name] = {k: _text(v) for k, v in f[name].attrs.items()
                                    if k in _KEPT_ATTRS}
             return _CaseData(_text(f.attrs.get("status", "complete")), RESUME_VARIABLE in f,
-                             arrays, attrs)
+                             _text(f.attrs.get("inputs", "")),
+                             _text(f.attrs.get("thirdbody_version", "")), arrays, attrs)
     except OSError:
         path.unlink()
         return None
@@ -483,28 +479,32 @@ class SweepReport:
 
 def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | None = None,
               workers: int | None = None, plots: bool = True, connect_timeout: float = 30.0,
-              progress: Callable[[dict, int, int], None] | None = None) -> SweepReport:
+              progress: Callable[[dict, int, int], None] | None = None,
+              cases: list[Case] | None = None) -> SweepReport:
     """Run every case of ``sweep`` that is not finished in ``out``, then summarise.
 
     ``client``: an existing :class:`dask.distributed.Client` (left open); else ``scheduler``
     (``tcp://host:port`` of a running cluster, reached within ``connect_timeout`` seconds, else
     OSError and nothing is written); else a LocalCluster of ``workers`` single-threaded
     processes (default: the number of cores), closed at the end. ``progress(record, done,
-    total)`` is called after every case. Raises :class:`SweepError` (before writing anything)
-    for an invalid sweep.
+    total)`` is called after every case. ``cases``: ``sweep.cases()`` if already computed.
+    Raises :class:`SweepError` (before writing anything) for an invalid sweep.
     """
     start = time.perf_counter()
-    cases = sweep.cases()
+    cases = sweep.cases() if cases is None else cases
     out = Path(out)
     cases_dir = out / "cases"
     records: dict[str, dict] = {}
+    finished: dict[str, _CaseData] = {}     # read once, for the skip and for the summary
     todo = []
     for case in cases:
-        status = _case_status(cases_dir / case.filename)
-        if status is None:
+        found = _read_case(cases_dir / case.filename, _SUMMARY_NAMES)
+        if found is None or found.partial:
             todo.append(case)
         else:
-            records[case.case_id] = {"case": case.case_id, "status": status, "skipped": True}
+            finished[case.case_id] = found
+            records[case.case_id] = {"case": case.case_id, "status": found.status,
+                                     "skipped": True}
     total = len(cases)
     with _dask_client(client if todo else None, scheduler, workers, needed=bool(todo),
                       timeout=connect_timeout) as dask:
@@ -515,7 +515,7 @@ def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | No
                 progress(r, len(records), total)
         if todo:
             _run_tasks(dask, todo, cases_dir, records, total, progress, base_dir=sweep.base_dir)
-    summary = summarize(sweep, out, cases, records)
+    summary = summarize(sweep, out, cases, records, finished)
     figures = []
     if plots:
         from .plot import save_state_map
@@ -554,8 +554,9 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
     from dask.distributed import as_completed
 
     futures = {}
+    where = str(cases_dir.resolve())
     for case in todo:
-        fut = client.submit(run_case, case.data, base_dir, str(cases_dir.resolve()),
+        fut = client.submit(run_case, case.data, base_dir, where,
                             case.case_id, sweep_values=case.values,
                             key=f"thirdbody-case-{case.case_id}", pure=False)
         futures[fut] = case
@@ -575,6 +576,7 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
 # --- the summary -----------------------------------------------------------------------------
 _SUMMARY_INPUTS = ("turned", "state", "orientation", "ratio_up", "ratio_low", "compression",
                    "normal_force", "time_total")
+_SUMMARY_NAMES = tuple(dict.fromkeys((*_SUMMARY_INPUTS, *STEP_VARIABLES)))
 
 
 def _case_summary(case: _CaseData, theta0: float) -> dict:
@@ -624,9 +626,11 @@ _SUMMARY_VARIABLES = {
 
 
 def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
-              records: dict[str, dict] | None = None):
+              records: dict[str, dict] | None = None,
+              loaded: dict[str, _CaseData] | None = None):
     """Combine the finished cases in ``out/cases`` along the sweep axes: writes
-    ``out/summary.nc`` and ``out/summary.csv`` and returns the dataset."""
+    ``out/summary.nc`` and ``out/summary.csv`` and returns the dataset. ``loaded``: case
+    files already read (by case id), not read again."""
     import xarray as xr
 
     from .simulation import STATES
@@ -646,7 +650,7 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
         path = out / "cases" / case.filename
         ids[case.index] = case.case_id
         summ = {}
-        data_ = _read_case(path, {*_SUMMARY_INPUTS, *STEP_VARIABLES})
+        data_ = (loaded or {}).get(case.case_id) or _read_case(path, _SUMMARY_NAMES)
         if data_ is not None:
             summ = _case_summary(data_, float(case.config.particle.orientation_deg))
             if data_.partial:
