@@ -34,6 +34,7 @@ from pathlib import Path
 
 import thirdbody as tb
 from thirdbody.plot import save_all
+from thirdbody.records import orientation_label
 from thirdbody.shapes import Potato
 
 SEMI_AXES = (1.0e-3, 0.8e-3, 0.7e-3)      # m
@@ -76,8 +77,9 @@ def run_case(name: str, plates: tb.Plates, load, resolution: float, out: Path,
 
     def progress(r: tb.simulation.StepRecord) -> None:
         print(f"  [{name}] step {r.step:3d}  F_N = {r.normal_force:7.3f} N  "
-              f"c = {r.compression:.4f}  θ = {r.orientation:8.3f}°  {r.state:10s}  "
-              f"F_T/μF_N = {r.ratio_low:6.3f}  ({r.time_total:.2f} s)", flush=True)
+              f"c = {r.compression:.4f}  {orientation_label(r):>10s}  {r.state:10s}  "
+              f"F_T/μF_N = {r.ratio[1]:6.3f}  spots {r.spots[0]}+{r.spots[1]}  "
+              f"({r.time_total:.2f} s)", flush=True)
 
     ds = sim.run(progress=progress)
     elapsed = time.perf_counter() - start
@@ -86,14 +88,14 @@ def run_case(name: str, plates: tb.Plates, load, resolution: float, out: Path,
     with open(out / "summary.txt", "w") as f:
         f.write(f"# {name}: {sim.status}; {elapsed:.1f} s; cell size {sim.cell_size:.3g} m\n")
         f.write("# step F_N(N) compression theta(deg) state ratio_up ratio_low "
-                "contact_low(m2) stick_low(m2) position_x(m)\n")
+                "spots_up spots_low contact_low(m2) stick_low(m2) position_x(m)\n")
         for r in sim.records:
-            f.write(f"{r.step} {r.normal_force:.6g} {r.compression:.6g} {r.orientation:.6g} "
-                    f"{r.state} {r.ratio_up:.6g} {r.ratio_low:.6g} {r.contact_area_low:.6g} "
-                    f"{r.stick_area_low:.6g} {r.position_x:.6g}\n")
+            f.write(f"{r.step} {r.normal_force:.6g} {r.compression:.6g} {r.orientation[1]:.6g} "
+                    f"{r.state} {r.ratio[0]:.6g} {r.ratio[1]:.6g} {r.spots[0]} {r.spots[1]} "
+                    f"{r.contact_area[1]:.6g} {r.stick_area[1]:.6g} {r.position[0]:.6g}\n")
     turned = [r for r in sim.records if r.turned]
     print(f"[{name}] {sim.status}: {len(sim.records)} steps in {elapsed:.1f} s, "
-          f"{len(turned)} turning steps, final θ = {sim.records[-1].orientation:.3f}°"
+          f"{len(turned)} turning steps, final {orientation_label(sim.records[-1])}"
           if sim.records else f"[{name}] {sim.status}")
     return ds
 

@@ -60,8 +60,10 @@ def test_paper_figure5_example_runs(tmp_path):
     assert ds.attrs["status"] == "complete"
     names = ds.state.attrs["flag_meanings"].split()
     assert names[int(ds.state[0])] == "roll_lower"          # μ_up < μ_low: rolls on the lower
-    assert float(ds.slip_low[0]) == 0.0 and float(ds.slip_up[0]) != 0.0
-    assert (ds.rotation[1:] == 0).all()                      # then stable
+    slip = ds.slip.sel(component="x")
+    assert float(slip.sel(interface="lower")[0]) == 0.0
+    assert float(slip.sel(interface="upper")[0]) != 0.0
+    assert (ds.rotation_angle[1:] == 0).all()                # then stable
     for name in ("state", "orientation", "contact_maps"):
         for ext in ("png", "pdf"):
             assert (tmp_path / f"{name}.{ext}").stat().st_size > 1000

@@ -37,10 +37,12 @@ def test_stiff_particle_reproduces_the_rigid_criterion():
         sim, ds = run(theta, mu=0.6, load=tb.ForceTable([0.5]), resolution=resolution,
                       maps_every=0)
         assert sim.status == "complete"
-        ratio = float(ds.tangential_force_x[0] / ds.normal_force[0])
+        ratio = float(ds.tangential_force.sel(component="x")[0] / ds.normal_force[0])
         assert ratio < 0
+        # symmetric about the xz-plane: no y force (to the solver tolerance)
+        assert abs(float(ds.tangential_force.sel(component="y")[0])) < 1e-8 * abs(ratio)
         errors.append(abs(abs(ratio) / xi - 1))
-        assert ds.state.values[0] == 0 and float(ds.rotation[0]) == 0.0
+        assert ds.state.values[0] == 0 and float(ds.rotation_angle[0]) == 0.0
     assert errors[0] < 2e-3
     assert errors[1] < 2e-4
 
@@ -51,28 +53,36 @@ def test_tilted_ellipsoid_turns_to_the_rigid_equilibrium_angle_then_sticks():
     expected = math.degrees(rigid.ellipsoid_equilibrium_angle(A, C, math.radians(theta0), mu))
     sim, ds = run(theta0, mu=mu, load=tb.LinearRamp(stop=1.0, steps=3), maps_every=0)
     assert sim.status == "complete"
-    assert ds.turned.values.tolist() == [1, 0, 0] or ds.turned.values[0] == 1
+    # it turns in the first step; as the contacts grow the couple drifts a little above μ
+    # again (the elastic departure from ξ), so it may turn again by less than the bisection
+    # tolerance (0.01°), then sticks
+    assert ds.turned.values[0] == 1 and ds.turned.values[-1] == 0
+    assert (ds.rotation_angle.values[1:] <= 0.01).all()
     assert ds.state.attrs["flag_meanings"].split()[int(ds.state[0])] == "rotate"
     # within the march/bisection tolerance (0.01 deg) plus the elastic offset at this load
-    assert float(ds.orientation[0]) == pytest.approx(expected, abs=0.05)
+    assert float(ds.orientation.sel(component="y")[0]) == pytest.approx(expected, abs=0.05)
     # after turning it sticks: the demand is at or below μ F_N
-    assert (ds.ratio_low.values <= 1 + 1e-12).all()
-    assert float(ds.demand_ratio_low[0]) > 1
+    assert (ds.ratio.values <= 1 + 1e-12).all()
+    assert float(ds.demand_ratio.sel(interface="lower")[0]) > 1
 
 
 def test_upright_ellipsoid_has_no_moment_and_elliptic_hertz_spots():
     F = 0.5
     sim, ds = run(0.0, mu=0.3, E=10e9, load=tb.ForceTable([F]), resolution=400)
     assert sim.status == "complete"
-    assert float(ds.rotation[0]) == 0 and abs(float(ds.tangential_force_x[0])) < 1e-12 * F
+    assert float(ds.rotation_angle[0]) == 0
+    assert np.abs(ds.tangential_force.values[0]).max() < 1e-12 * F
     ref = hertz.elliptic_from_radii(F, A**2 / C, B**2 / C, tb.Material(10e9, 0.3).E_star)
-    for side in ("up", "low"):
-        area = float(ds[f"contact_area_{side}"][0])
+    for side in ("upper", "lower"):
+        area = float(ds.contact_area.sel(interface=side)[0])
         assert area == pytest.approx(math.pi * ref.semi_axis_x * ref.semi_axis_y, rel=0.05)
-        assert float(ds[f"approach_{side}"][0]) == pytest.approx(ref.approach, rel=0.02)
-        assert float(ds[f"pressure_{side}"].max()) == pytest.approx(ref.peak_pressure, rel=0.03)
+        assert float(ds.approach.sel(interface=side)[0]) == pytest.approx(ref.approach, rel=0.02)
+        assert float(ds.pressure.sel(interface=side).max()) == pytest.approx(ref.peak_pressure,
+                                                                             rel=0.03)
+        assert int(ds.spots.sel(interface=side)[0]) == 1
     # no tangential load: everything sticks
-    assert float(ds.stick_area_low[0]) == pytest.approx(float(ds.contact_area_low[0]))
+    assert float(ds.stick_area.sel(interface="lower")[0]) == pytest.approx(
+        float(ds.contact_area.sel(interface="lower")[0]))
 
 
 def test_equilibrium_coulomb_and_contact_at_every_step():
@@ -81,13 +91,12 @@ def test_equilibrium_coulomb_and_contact_at_every_step():
     assert (ds.force_residual < 1e-8).all()
     assert (ds.tangential_force_residual < 1e-7).all()
     assert (ds.moment_residual < 1e-7).all()
-    for side, mu in (("up", 0.3), ("low", 0.3)):
-        p = ds[f"pressure_{side}"].values
-        tau = np.hypot(ds[f"traction_x_{side}"].values, ds[f"traction_y_{side}"].values)
+    for side, mu in (("upper", 0.3), ("lower", 0.3)):
+        p = ds.pressure.sel(interface=side).values
+        tau = np.hypot(*ds.traction.sel(interface=side).transpose("component", ...).values)
         assert (p >= 0).all()
         assert (tau <= mu * p * (1 + 1e-12) + 1e-300).all()
-        assert (ds[f"map_cropped_{side}"] == 0).all()
-    assert (ds.normal_residual_low < 1e-7).all() and (ds.tangential_residual_low < 1e-7).all()
+    assert (ds.normal_residual < 1e-7).all() and (ds.tangential_residual < 1e-7).all()
 
 
 def test_mirror_symmetry():
@@ -95,8 +104,9 @@ def test_mirror_symmetry():
     _, ds = run(20.0, mu=0.3, maps_every=0)
     _, dm = run(-20.0, mu=0.3, maps_every=0)
     np.testing.assert_allclose(dm.orientation, -ds.orientation, atol=1e-9)
-    np.testing.assert_allclose(dm.tangential_force_x, -ds.tangential_force_x, rtol=1e-6)
-    np.testing.assert_allclose(dm.position_x, -ds.position_x, atol=1e-12)
+    np.testing.assert_allclose(dm.tangential_force.sel(component="x"),
+                               -ds.tangential_force.sel(component="x"), rtol=1e-6)
+    np.testing.assert_allclose(dm.position, -ds.position, atol=1e-12)
     np.testing.assert_array_equal(dm.state, ds.state)
 
 
@@ -115,16 +125,17 @@ def test_rolling_about_the_higher_friction_interface():
     names = ds.state.attrs["flag_meanings"].split()
     assert names[int(ds.state[0])] == "roll_lower"
     assert names[int(ds.state[1])] == "stick"          # stable at the same load
-    assert float(ds.slip_low[0]) == pytest.approx(0.0, abs=1e-15)
-    turn = math.radians(float(ds.rotation[0]))
+    slip = ds.slip.sel(component="x")
+    assert float(slip.sel(interface="lower")[0]) == pytest.approx(0.0, abs=1e-15)
+    turn = math.radians(float(ds.rotation.sel(component="y")[0]))
     # slip = ∫ h(θ) dθ over the turn, with h between the final gap and the initial height
-    slip = float(ds.slip_up[0])
-    assert slip * turn > 0
+    slip_up = float(slip.sel(interface="upper")[0])
+    assert slip_up * turn > 0
     d0 = json.loads(ds.attrs["inputs"])["d0"]
-    assert abs(turn) * float(ds.plate_gap[0]) < abs(slip) < abs(turn) * d0
-    assert abs(float(ds.position_x[0])) > 0
-    assert float(ds.ratio_up[0]) == pytest.approx(1.0, abs=0.01)
-    assert float(ds.ratio_low[0]) == pytest.approx(0.5, abs=0.01)
+    assert abs(turn) * float(ds.plate_gap[0]) < abs(slip_up) < abs(turn) * d0
+    assert abs(float(ds.position.sel(component="x")[0])) > 0
+    assert float(ds.ratio.sel(interface="upper")[0]) == pytest.approx(1.0, abs=0.01)
+    assert float(ds.ratio.sel(interface="lower")[0]) == pytest.approx(0.5, abs=0.01)
 
 
 def test_gap_control_meets_the_prescribed_compression():
@@ -192,6 +203,6 @@ def test_paper_fig4_smaller_friction_turns_further_then_sticks():
         ds = sim.run()
         assert sim.status == "complete"
         assert ds.turned.values.tolist() == [1, 0, 0, 0]
-        assert (ds.ratio_low.values[1:] < 1).all()
-        turns[mu] = float(ds.rotation[0])
+        assert (ds.ratio.values[1:] < 1).all()
+        turns[mu] = float(ds.rotation.sel(component="y")[0])
     assert 5.5 < turns[0.3] < 7.0 and 8.0 < turns[0.2] < 9.5

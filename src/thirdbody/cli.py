@@ -50,6 +50,7 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
     import warnings
 
     from .io import ConfigError, load_config, run_to_file
+    from .records import orientation_label
     from .simulation import Simulation, SimulationError
 
     try:
@@ -85,7 +86,7 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         def progress(r) -> None:
             bar.update(task, completed=r.step + 1, description=(
                 f"step {r.step}: F_N {r.normal_force:.4g} N, {r.state}, "
-                f"θ {r.orientation:.2f}°, F_T/μF_N {r.ratio_low:.3f}"))
+                f"{orientation_label(r)}, F_T/μF_N {r.ratio[1]:.3f}"))
 
         try:
             with warnings.catch_warnings():
@@ -291,12 +292,13 @@ def _validation_rows() -> list[tuple[str, float, float, float]]:
                         tb.ForceTable([0.5]), resolution=400, maps_every=0)
     ds = sim.run()
     rows.append(("rigid criterion: steel ellipsoid θ=20°, |F'_x|/F_N",
-                 float(np.abs(ds.tangential_force_x[0]) / ds.normal_force[0]),
+                 float(np.abs(ds.tangential_force.sel(component="x")[0]) / ds.normal_force[0]),
                  rigid.ellipsoid_xi(A, C, math.radians(20.0)), 2e-3))
     sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), mat, 20.0), tb.Plates(0.3),
                         tb.ForceTable([1.0]), resolution=100, maps_every=0)
     ds = sim.run()
-    rows.append(("rigid equilibrium angle, μ=0.3 (deg)", float(ds.orientation[0]),
+    rows.append(("rigid equilibrium angle, μ=0.3 (deg)",
+                 float(ds.orientation.sel(component="y")[0]),
                  math.degrees(rigid.ellipsoid_equilibrium_angle(A, C, math.radians(20.0), 0.3)),
                  5e-3))
     return rows

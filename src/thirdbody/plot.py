@@ -36,40 +36,64 @@ def _title(ds) -> str:
     nan = float("nan")
     up, low = i.get("mu_up", nan), i.get("mu_low", nan)
     mu = f"μ = {up:g}" if up == low else f"μ_up = {up:g}, μ_low = {low:g}"
-    return (f"E = {i.get('E', nan) / 1e9:g} GPa, ν = {i.get('nu', nan):g}, {mu}, "
-            f"θ₀ = {i.get('orientation_deg', nan):g}°")
+    start = f"θ₀ = {i.get('orientation_deg', nan):g}°"
+    if i.get("tilt_axis_deg", 90.0) != 90.0 or i.get("yaw_deg", 0.0) != 0.0:
+        start += f" about azimuth {i.get('tilt_axis_deg', nan):g}°"
+        if i.get("yaw_deg", 0.0):
+            start += f", yaw {i['yaw_deg']:g}°"
+    return f"E = {i.get('E', nan) / 1e9:g} GPa, ν = {i.get('nu', nan):g}, {mu}, {start}"
+
+
+def _planar(ds) -> bool:
+    """Every orientation and turn of the run is about the y axis (the paper's case)."""
+    return bool(np.all(np.abs(ds.orientation.sel(component="x").values) < 1e-9)
+                and np.all(np.abs(ds.rotation.sel(component="x").values) < 1e-9))
+
+
+def _signed(ds) -> np.ndarray:
+    """+1/−1 per step: the side on which the lower plate pushes, relative to the first
+    non-zero F' of the run (for the paper's case, the sign of F'_x at the start)."""
+    f = ds.tangential_force.transpose("step", "component").values
+    norms = np.hypot(f[:, 0], f[:, 1])
+    first = np.flatnonzero(norms > 0)
+    if not first.size:
+        return np.ones(len(f))
+    ref = f[first[0]] / norms[first[0]]
+    sign = np.sign(f @ ref)
+    return np.where(sign == 0, 1.0, sign)
 
 
 def state_curve(ds, labels: dict[int, str] | None = None):
     """F_T/(μF_N) against the compression ratio (d₀ − h)/d₀ (the paper's Figs. 3a, 4, 5a).
 
     The stick region (ratio < 1) is shaded, the slip line at 1 drawn; with unequal μ there is
-    one curve per interface. Steps in which the particle turned are marked. ``labels`` maps
-    step indices to letters written next to the curve.
+    one curve per interface. The sign says whether the lower plate pushes the way it did at
+    the start (+) or the opposite way (−). Steps in which the particle turned are marked.
+    ``labels`` maps step indices to letters written next to the curve.
     """
     plt = _plt()
     i = _inputs(ds)
     c = ds.compression.values
+    ratio = {side: ds.ratio.sel(interface=side).values for side in ("upper", "lower")}
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
-    top = max(1.2, float(np.nanmax(np.abs(ds.ratio_low.values))) * 1.1)
+    finite = np.abs(ratio["lower"])[np.isfinite(ratio["lower"])]
+    top = max(1.2, float(finite.max(initial=0.0)) * 1.1)
     ax.axhspan(-top, 1.0, color="0.88", zorder=0, label="stick (partial slip)")
     ax.axhline(1.0, color="tab:red", lw=1.5, label="slip: F_T = μF_N")
-    # the sign tells on which side the lower plate pushes
-    sign = np.sign(ds.tangential_force_x.values)
+    sign = _signed(ds)
     equal = i.get("mu_up") == i.get("mu_low")
-    curves = [("low", "F_T/(μF_N)" if equal else "lower: F_T/(μ_low F_N)", "tab:blue", "o")]
+    curves = [("lower", "F_T/(μF_N)" if equal else "lower: F_T/(μ_low F_N)", "tab:blue", "o")]
     if not equal:
-        curves = [("up", "upper: F_T/(μ_up F_N)", "tab:blue", "*"),
-                  ("low", "lower: F_T/(μ_low F_N)", "tab:red", "^")]
+        curves = [("upper", "upper: F_T/(μ_up F_N)", "tab:blue", "*"),
+                  ("lower", "lower: F_T/(μ_low F_N)", "tab:red", "^")]
     for side, label, colour, marker in curves:
-        r = ds[f"ratio_{side}"].values * np.where(sign == 0, 1.0, sign) * (sign[0] or 1)
-        ax.plot(c, r, marker=marker, ms=4, color=colour, lw=1.2, label=label)
+        ax.plot(c, ratio[side] * sign, marker=marker, ms=4, color=colour, lw=1.2, label=label)
     turned = ds.turned.values.astype(bool)
     if turned.any():
         ax.plot(c[turned], np.ones(turned.sum()), "x", color="k", ms=6, label="turned")
     for step, text in (labels or {}).items():
         k = int(np.flatnonzero(ds.step.values == step)[0])
-        ax.annotate(text, (c[k], ds.ratio_low.values[k]), textcoords="offset points",
+        ax.annotate(text, (c[k], ratio["lower"][k] * sign[k]), textcoords="offset points",
                     xytext=(4, 6), fontsize=11, fontweight="bold")
     ax.set_xlabel("compression (d₀ − h)/d₀")
     ax.set_ylabel("F_T / (μ F_N)")
@@ -81,20 +105,64 @@ def state_curve(ds, labels: dict[int, str] | None = None):
 
 
 def orientation_history(ds):
-    """Orientation θ (degrees) and the centroid's horizontal position (µm) against the
-    compression ratio."""
+    """The orientation (degrees) and the centroid's horizontal position and the slips (µm)
+    against the compression ratio. For a run turning about y only, the orientation is the
+    paper's θ; otherwise both components of the tilt vector are drawn, and the turn axis of
+    each turning step is shown in a top view."""
     plt = _plt()
     c = ds.compression.values
-    fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 5.0), sharex=True, constrained_layout=True)
-    a1.plot(c, ds.orientation.values, "o-", ms=3)
-    a1.set_ylabel("orientation θ (°)")
-    a2.plot(c, ds.position_x.values * 1e6, "o-", ms=3, color="tab:green", label="centroid x")
-    a2.plot(c, ds.slip_up.values * 1e6, "--", color="tab:blue", label="slip, upper")
-    a2.plot(c, ds.slip_low.values * 1e6, ":", color="tab:red", label="slip, lower")
+    planar = _planar(ds)
+    if planar:
+        fig, (a1, a2) = plt.subplots(2, 1, figsize=(6.4, 5.0), sharex=True,
+                                     constrained_layout=True)
+    else:
+        fig = plt.figure(figsize=(10.5, 5.0), constrained_layout=True)
+        grid = fig.add_gridspec(2, 2, width_ratios=(1.6, 1))
+        a1 = fig.add_subplot(grid[0, 0])
+        a2 = fig.add_subplot(grid[1, 0], sharex=a1)
+        a3 = fig.add_subplot(grid[:, 1])
+    tilt = ds.orientation.transpose("step", "component").values
+    if planar:
+        a1.plot(c, tilt[:, 1], "o-", ms=3)
+        a1.set_ylabel("orientation θ about y (°)")
+    else:
+        a1.plot(c, tilt[:, 0], "o-", ms=3, label="tilt vector x")
+        a1.plot(c, tilt[:, 1], "s-", ms=3, label="tilt vector y")
+        a1.set_ylabel("orientation (°)")
+        a1.legend(fontsize=8)
+    components = ("x",) if planar else ("x", "y")
+    styles = {"x": "-", "y": "-."}
+    for comp in components:
+        suffix = f" {comp}"
+        a2.plot(c, ds.position.sel(component=comp).values * 1e6, "o" + styles[comp], ms=3,
+                color="tab:green", label="centroid" + suffix)
+        a2.plot(c, ds.slip.sel(interface="upper", component=comp).values * 1e6,
+                "--" if comp == "x" else (0, (3, 1, 1, 1)), color="tab:blue",
+                label="slip, upper" + suffix)
+        a2.plot(c, ds.slip.sel(interface="lower", component=comp).values * 1e6,
+                ":" if comp == "x" else (0, (1, 3)), color="tab:red", label="slip, lower" + suffix)
     a2.set_ylabel("displacement (µm)")
     a2.set_xlabel("compression (d₀ − h)/d₀")
-    a2.legend(fontsize=8)
+    a2.legend(fontsize=7, ncols=2)
     a1.set_title(_title(ds), fontsize=9)
+    if not planar:
+        a3.plot(tilt[:, 0], tilt[:, 1], "o-", ms=3, color="0.4", label="tilt vector")
+        turned = np.flatnonzero(ds.turned.values.astype(bool))
+        rot = ds.rotation.transpose("step", "component").values
+        for k in turned:
+            a3.annotate("", xy=(tilt[k, 0], tilt[k, 1]),
+                        xytext=(tilt[k, 0] - rot[k, 0], tilt[k, 1] - rot[k, 1]),
+                        arrowprops={"arrowstyle": "->", "color": "tab:red", "lw": 1.5})
+            a3.annotate(f"{k}", (tilt[k, 0], tilt[k, 1]), textcoords="offset points",
+                        xytext=(4, 4), fontsize=7, color="tab:red")
+        a3.plot([], [], color="tab:red", label="turn (rotation vector) in a step")
+        a3.axhline(0, color="0.8", lw=0.8)
+        a3.axvline(0, color="0.8", lw=0.8)
+        a3.set_aspect("equal", adjustable="datalim")
+        a3.set_xlabel("tilt vector x (°)")
+        a3.set_ylabel("tilt vector y (°)")
+        a3.set_title("top view: the tilt axis is the vector's direction", fontsize=8)
+        a3.legend(fontsize=7)
     return fig
 
 
@@ -118,9 +186,23 @@ def _scale_bar(ax, span_um: float) -> None:
     ax.add_artist(bar)
 
 
+def _extent(ds, side: str) -> tuple[slice, slice]:
+    """Rows and columns of the maps where ``side`` has contact at some stored step, with a
+    margin of a tenth of the extent (at least 3 cells)."""
+    touched = (ds.pressure.sel(interface=side).values > 0).any(axis=0)
+    rows, cols = np.flatnonzero(touched.any(axis=1)), np.flatnonzero(touched.any(axis=0))
+    if not rows.size:
+        return slice(None), slice(None)
+    margin = max(3, int(0.1 * max(rows[-1] - rows[0], cols[-1] - cols[0])))
+    ny, nx = touched.shape
+    return (slice(max(rows[0] - margin, 0), min(rows[-1] + margin + 1, ny)),
+            slice(max(cols[0] - margin, 0), min(cols[-1] + margin + 1, nx)))
+
+
 def contact_maps(ds, steps: list[int] | None = None):
     """Pressure and stick/slip/open maps of both interfaces at the chosen steps (default: the
-    first, the middle and the last stored map), side by side, axes in µm with a scale bar."""
+    first, the middle and the last stored map), side by side, axes in µm (particle frame)
+    with a scale bar. Each interface's panels cover every spot it had at a stored step."""
     plt = _plt()
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -129,28 +211,37 @@ def contact_maps(ds, steps: list[int] | None = None):
     if steps is None:
         steps = sorted({stored[0], stored[len(stored) // 2], stored[-1]})
     steps = [s for s in steps if s in stored]
-    x = ds.map_x.values * 1e6
-    y = ds.map_y.values * 1e6
-    extent = (x[0], x[-1], y[0], y[-1])
+    x_all = ds.map_x.values * 1e6
+    y_all = ds.map_y.values * 1e6
+    spacing = float(x_all[1] - x_all[0]) if x_all.size > 1 else 1.0
     fig, axes = plt.subplots(len(steps), 4, figsize=(12, 3.0 * len(steps) + 0.6),
                              squeeze=False, constrained_layout=True)
     status_map = ListedColormap(_STATUS_COLOURS)
-    pmax = max(float(ds.pressure_up.max()), float(ds.pressure_low.max())) / 1e6
-    for row, step in enumerate(steps):
-        k = stored.index(step)
-        c = float(ds.compression.sel(step=step))
-        for col, (side, where) in enumerate((("up", "upper"), ("low", "lower"))):
+    pmax = float(ds.pressure.max()) / 1e6
+    for col, (side, where) in enumerate((("upper", "upper"), ("lower", "lower"))):
+        rows, cols = _extent(ds, side)
+        x, y = x_all[cols], y_all[rows]
+        extent = (x[0] - spacing / 2, x[-1] + spacing / 2, y[0] - spacing / 2,
+                  y[-1] + spacing / 2)
+        for row, step in enumerate(steps):
+            k = stored.index(step)
+            c = float(ds.compression.sel(step=step))
+            spots = int(ds.spots.sel(step=step, interface=side))
             ax_p, ax_s = axes[row, 2 * col], axes[row, 2 * col + 1]
-            im = ax_p.imshow(ds[f"pressure_{side}"].values[k] / 1e6, origin="lower",
-                             extent=extent, cmap="viridis", vmin=0, vmax=pmax)
-            ax_s.imshow(ds[f"status_{side}"].values[k], origin="lower", extent=extent,
-                        cmap=status_map, vmin=-0.5, vmax=2.5, interpolation="nearest")
+            p = ds.pressure.sel(interface=side).values[k][rows, cols] / 1e6
+            status = ds.status.sel(interface=side).values[k][rows, cols]
+            im = ax_p.imshow(p, origin="lower", extent=extent, cmap="viridis", vmin=0,
+                             vmax=pmax)
+            ax_s.imshow(status, origin="lower", extent=extent, cmap=status_map, vmin=-0.5,
+                        vmax=2.5, interpolation="nearest")
+            plural = "s" if spots != 1 else ""
             ax_p.set_title(f"step {step}, {where}: pressure (c = {c:.3f})", fontsize=9)
-            ax_s.set_title(f"step {step}, {where}: stick / slip", fontsize=9)
+            ax_s.set_title(f"step {step}, {where}: stick / slip, {spots} spot{plural}",
+                           fontsize=9)
             for ax in (ax_p, ax_s):
                 ax.set_xlabel("x (µm)")
                 ax.set_ylabel("y (µm)")
-                _scale_bar(ax, float(x[-1] - x[0]))
+                _scale_bar(ax, float(extent[1] - extent[0]))
             if col == 1:
                 fig.colorbar(im, ax=ax_p, label="p (MPa)", shrink=0.8)
     handles = [Patch(facecolor=col, edgecolor="k", label=name)

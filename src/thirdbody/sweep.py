@@ -54,6 +54,8 @@ import numpy as np
 
 from .io.config import Config, ConfigError, parse_config
 from .io.results import RESUME_VARIABLE, run_to_file, write_results
+from .records import COORDS as _RECORD_COORDS
+from .records import VARIABLES
 
 __all__ = [
     "BEHAVIOURS",
@@ -75,13 +77,13 @@ BEHAVIOURS = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "error", 
 _BEHAVIOUR_CODE = {name: i for i, name in enumerate(BEHAVIOURS)}
 
 #: Per-step variables copied into the summary (when every case has the same step count).
-STEP_VARIABLES = ("normal_force", "compression", "orientation", "state", "ratio_up",
-                  "ratio_low", "position_x")
+STEP_VARIABLES = ("normal_force", "compression", "orientation", "state", "ratio", "position")
 
 #: Units of the configuration keys one is likely to sweep (coordinate attributes).
 _KEY_UNITS = {
     "plates.mu": "1", "plates.mu_up": "1", "plates.mu_low": "1",
-    "particle.orientation_deg": "degree", "particle.E": "Pa", "particle.nu": "1",
+    "particle.orientation_deg": "degree", "particle.tilt_axis_deg": "degree",
+    "particle.yaw_deg": "degree", "particle.E": "Pa", "particle.nu": "1",
     "particle.radius": "m", "particle.semi_axes": "m", "particle.amplitude": "1",
     "particle.seed": "1", "particle.n_waves": "1", "load.stop": "N", "load.hold": "N",
     "numerics.resolution": "cells per particle size",
@@ -574,19 +576,38 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
 
 
 # --- the summary -----------------------------------------------------------------------------
-_SUMMARY_INPUTS = ("turned", "state", "orientation", "ratio_up", "ratio_low", "compression",
-                   "normal_force", "time_total")
+_SUMMARY_INPUTS = ("turned", "state", "quaternion", "ratio", "compression", "normal_force",
+                   "time_total")
 _SUMMARY_NAMES = tuple(dict.fromkeys((*_SUMMARY_INPUTS, *STEP_VARIABLES)))
 
 
-def _case_summary(case: _CaseData, theta0: float) -> dict:
+def _total_rotation(case: _CaseData) -> tuple[float, float]:
+    """The angle (degrees) from the initial to the final orientation, signed by the side of
+    +y its axis points to (for the paper's turns about y: the change of θ), and the azimuth
+    of its axis (degrees from +x)."""
+    from scipy.spatial.transform import Rotation
+
+    try:
+        start = Rotation.from_quat(json.loads(case.inputs)["quaternion"])
+    except (ValueError, KeyError, TypeError):
+        return math.nan, math.nan
+    vector = np.degrees((Rotation.from_quat(case.arrays["quaternion"][-1]) * start.inv())
+                        .as_rotvec())
+    angle = float(np.linalg.norm(vector))
+    if angle == 0:
+        return 0.0, math.nan
+    sign = -1.0 if vector[1] < 0 or (vector[1] == 0 and vector[0] < 0) else 1.0
+    return sign * angle, math.degrees(math.atan2(vector[1], vector[0]))
+
+
+def _case_summary(case: _CaseData) -> dict:
     """Scalar summaries of one case's per-step results."""
     from .simulation import STATES
 
     nan = math.nan
     a = case.arrays
     n = len(a.get("state", ()))
-    out = {"steps_done": n, "total_rotation": nan, "first_turn_force": nan,
+    out = {"steps_done": n, "total_rotation": nan, "turn_azimuth": nan, "first_turn_force": nan,
            "first_turn_compression": nan, "turning_steps": 0, "final_state": -1,
            "final_ratio_up": nan, "final_ratio_low": nan, "final_compression": nan,
            "behaviour": _BEHAVIOUR_CODE["failed"], "compute_time": 0.0}
@@ -594,10 +615,11 @@ def _case_summary(case: _CaseData, theta0: float) -> dict:
         return out
     turned = np.flatnonzero(a["turned"].astype(bool))
     state = a["state"]
-    out.update(total_rotation=float(a["orientation"][-1] - theta0),
+    total, azimuth = _total_rotation(case)
+    out.update(total_rotation=total, turn_azimuth=azimuth,
                turning_steps=int(turned.size), final_state=int(state[-1]),
-               final_ratio_up=float(a["ratio_up"][-1]),
-               final_ratio_low=float(a["ratio_low"][-1]),
+               final_ratio_up=float(a["ratio"][-1][0]),
+               final_ratio_low=float(a["ratio"][-1][1]),
                final_compression=float(a["compression"][-1]),
                compute_time=float(np.sum(a["time_total"])))
     if turned.size:
@@ -612,7 +634,10 @@ def _case_summary(case: _CaseData, theta0: float) -> dict:
 
 _SUMMARY_VARIABLES = {
     "behaviour": ("1", "behaviour over the run: " + ", ".join(BEHAVIOURS)),
-    "total_rotation": ("degree", "final orientation minus the initial one"),
+    "total_rotation": ("degree", "angle from the initial to the final orientation, negative "
+                                 "if its axis points to -y (turns about y: the change of "
+                                 "theta)"),
+    "turn_azimuth": ("degree", "azimuth of the axis of the total rotation, from +x"),
     "first_turn_force": ("N", "normal force at the first turning step (NaN: never turned)"),
     "first_turn_compression": ("1", "compression at the first turning step"),
     "turning_steps": ("1", "number of steps in which the particle turned"),
@@ -652,7 +677,7 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
         summ = {}
         data_ = (loaded or {}).get(case.case_id) or _read_case(path, _SUMMARY_NAMES)
         if data_ is not None:
-            summ = _case_summary(data_, float(case.config.particle.orientation_deg))
+            summ = _case_summary(data_)
             if data_.partial:
                 summ["behaviour"] = _BEHAVIOUR_CODE["missing"]
                 status[case.index] = "incomplete"
@@ -693,8 +718,10 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
     if len(complete) == 1:                      # per-step scalars share one step axis
         n_steps = complete.pop()
         coords["step"] = ("step", np.arange(n_steps), {"long_name": "load step index"})
+        extra_dims = {v.name: v.dims for v in VARIABLES}
         for name in STEP_VARIABLES:
-            arr = np.full((*shape, n_steps), np.nan)
+            extra = extra_dims[name]
+            arr = np.full((*shape, n_steps, *[len(_RECORD_COORDS[d]) for d in extra]), np.nan)
             attrs = {}
             for index, d in datasets.items():
                 values = d.arrays[name][:n_steps]
@@ -702,7 +729,9 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
                 attrs = d.attrs[name]
             if name == "state":
                 arr = np.nan_to_num(arr, nan=-1).astype(np.int8)
-            data[name] = ((*dims, "step"), arr, attrs)
+            data[name] = ((*dims, "step", *extra), arr, attrs)
+            for d in extra:
+                coords[d] = (d, list(_RECORD_COORDS[d]))
     from ._version import __version__
 
     summary = xr.Dataset(data, coords=coords, attrs={

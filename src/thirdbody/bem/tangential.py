@@ -450,6 +450,11 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
                 f"(mu = {mu}, F_N = {FN:.6g} N): the contact slides")
         if Qn >= cap * (1 - 1e-12) and Qn > 0:
             return _full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K)
+        if cap == 0:
+            # frictionless (μ = 0) and no force: no traction anywhere, every cell free to slip;
+            # the plate's shift is undefined, so it does not move
+            return _finish(normal, mu, np.zeros_like(tau0), tau0, np.zeros(2), prev_shift, K,
+                           k0, 0, tol, full=True)
         ds_prescribed = None
     else:
         ds_prescribed = vec(shift, "shift") - prev_shift

@@ -10,7 +10,10 @@ A configuration has four tables (SI units throughout; angles in degrees)::
     wavenumber_range = [4.0, 8.0]   # potato
     E = 1.0e9                       # Pa, > 0
     nu = 0.3                        # (-1, 0.5]
-    orientation_deg = 20.0
+    orientation_deg = 20.0           # tilt, degrees, about the axis at tilt_axis_deg
+    tilt_axis_deg = 90.0            # azimuth of the tilt axis from +x (90: +y, the paper's)
+    yaw_deg = 0.0                   # about the body z axis, before the tilt
+    # quaternion = [0, 0.17, 0, 0.98]   # or the orientation as (x, y, z, w)
 
     [plates]
     mu_up = 0.46                    # >= 0
@@ -80,7 +83,22 @@ class Particle(_Model):
                         Field(discriminator="shape")]
     E: Annotated[float, Field(gt=0, description="Young's modulus, Pa")]
     nu: Annotated[float, Field(gt=-1, le=0.5, description="Poisson ratio")]
-    orientation_deg: float = 0.0
+    orientation_deg: float = Field(0.0, allow_inf_nan=False,
+                                   description="initial tilt angle, degrees")
+    tilt_axis_deg: float = Field(90.0, allow_inf_nan=False,
+                                 description="azimuth of the tilt axis from +x, degrees")
+    yaw_deg: float = Field(0.0, allow_inf_nan=False,
+                           description="rotation about the body z axis before the tilt")
+    quaternion: tuple[float, float, float, float] | None = Field(
+        None, description="initial orientation (x, y, z, w), instead of the tilt")
+
+    @model_validator(mode="after")
+    def _one_orientation(self):
+        if self.quaternion is not None and (self.orientation_deg, self.tilt_axis_deg,
+                                            self.yaw_deg) != (0.0, 90.0, 0.0):
+            raise ValueError("give either a tilt (orientation_deg, tilt_axis_deg, yaw_deg) or "
+                             "a quaternion, not both")
+        return self
 
 
 class Plates(_Model):
@@ -141,7 +159,9 @@ class Config(_Model):
         if isinstance(data, dict) and isinstance(data.get("particle"), dict):
             p = dict(data["particle"])
             if "geometry" not in p:
-                material = {k: p.pop(k) for k in ("E", "nu", "orientation_deg") if k in p}
+                material = {k: p.pop(k) for k in ("E", "nu", "orientation_deg",
+                                                  "tilt_axis_deg", "yaw_deg", "quaternion")
+                            if k in p}
                 data = {**data, "particle": {"geometry": p, **material}}
         return data
 
@@ -164,8 +184,9 @@ class Config(_Model):
             if not path.is_absolute():
                 path = Path(self.base_dir) / path
             shape = shapes.MeshShape.from_file(path, scale=g.scale)
-        particle = tb.Particle(shape, tb.Material(self.particle.E, self.particle.nu),
-                               self.particle.orientation_deg)
+        pc = self.particle
+        particle = tb.Particle(shape, tb.Material(pc.E, pc.nu), pc.orientation_deg,
+                               pc.tilt_axis_deg, pc.yaw_deg, pc.quaternion)
         plates = tb.Plates(self.plates.mu_up, self.plates.mu_low)
         ld = self.load
         if isinstance(ld, LinearRampLoad):

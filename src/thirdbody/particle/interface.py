@@ -1,22 +1,25 @@
-"""One plate-particle interface: its window of cells, the gap under it, and its contact solves.
+"""One plate-particle interface: the cells that can touch, the gap under them, and the solves.
 
-Windows live on a lattice shared by every step of a run: cell centres at (i Δ, j Δ) in world
-coordinates (m) with integer i, j, so a window that grows or moves between steps maps fields onto
-the new window by an integer offset, without interpolation (the tangential history needs this).
+Windows live on a lattice shared by every step of a run: cell centres at (i Δ, j Δ) in the
+particle frame (m) with integer i, j, so fields move between windows by integer offsets, without
+interpolation (the tangential history needs this).
 
-A window is centred on the plate's first-contact point (the particle's lowest or highest point at
-orientation θ) and starts at ``min_cells`` across. When the contact, or the set of cells that
-could enter contact (gap below the approach), reaches its edge, the window doubles and the solve
-is repeated: a contact is never truncated.
+A solve at an orientation takes the cells that can touch from the footprint scan of
+:class:`~thirdbody.particle.surface.Surfaces` (every spot, wherever it is), solves them as one
+contact problem on the bounding box of those cells (cells in between are +inf: they share the
+plate's rigid approach and interact through the half-space kernel, but cannot touch), and then
+checks that nothing was left out: the approach must stay below the bound the cells were chosen
+for, and no cell just outside them may lie below the approach. Otherwise the bound grows and the
+solve is repeated from the last pressure.
 """
 
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import ndimage
 
 from ..bem import (
     ContactAtEdgeError,
@@ -27,11 +30,13 @@ from ..bem import (
     solve_tangential,
 )
 from ..material import Material
-from ..shapes import Shape
+from ..orientation import key
+from .surface import LOWER, UPPER, Surfaces
 
-__all__ = ["Interface", "InterfaceNormal", "Window"]
+__all__ = ["Interface", "InterfaceNormal", "Window", "count_spots", "remap"]
 
-_MAX_CELLS = 4096
+_ROUND = 8            # window sizes are multiples of this (the FFT operators are cached by size)
+_ATTEMPTS = 12
 
 
 @dataclass(frozen=True)
@@ -48,16 +53,16 @@ class Window:
                     center=((self.i0 + (self.nx - 1) / 2) * spacing,
                             (self.j0 + (self.ny - 1) / 2) * spacing))
 
-    def enlarged(self, factor: int = 2) -> Window:
-        nx, ny = self.nx * factor, self.ny * factor
-        return Window(self.i0 - (nx - self.nx) // 2, self.j0 - (ny - self.ny) // 2, nx, ny)
+    def slices(self, n: int) -> tuple[slice, slice]:
+        """Row and column slices of this window in a (2n+1)² lattice array (origin at n)."""
+        return (slice(self.j0 + n, self.j0 + n + self.ny),
+                slice(self.i0 + n, self.i0 + n + self.nx))
 
-    @staticmethod
-    def around(x: float, y: float, cells: int, spacing: float) -> Window:
-        """A ``cells`` x ``cells`` window whose centre is within half a cell of (x, y) (m)."""
-        i = math.floor(x / spacing + 0.5) - cells // 2
-        j = math.floor(y / spacing + 0.5) - cells // 2
-        return Window(i, j, cells, cells)
+    def union(self, other: Window) -> Window:
+        i0, j0 = min(self.i0, other.i0), min(self.j0, other.j0)
+        i1 = max(self.i0 + self.nx, other.i0 + other.nx)
+        j1 = max(self.j0 + self.ny, other.j0 + other.ny)
+        return Window(i0, j0, i1 - i0, j1 - j0)
 
 
 def remap(field: np.ndarray, source: Window, target: Window) -> np.ndarray:
@@ -71,15 +76,45 @@ def remap(field: np.ndarray, source: Window, target: Window) -> np.ndarray:
     return out
 
 
+def count_spots(contact: np.ndarray) -> int:
+    """Number of separate contact spots: connected pieces of the contact set (cells touching
+    at an edge or a corner belong to the same spot)."""
+    _, n = ndimage.label(contact, structure=np.ones((3, 3), dtype=bool))
+    return int(n)
+
+
 @dataclass(frozen=True)
 class InterfaceNormal:
-    """A normal solve at one interface: the contact and its pressure centroid (world, m)."""
+    """A normal solve at one interface.
+
+    Attributes
+    ----------
+    side : {"lower", "upper"}
+    orientation : tuple
+        Key of the orientation (:func:`thirdbody.orientation.key`).
+    window : Window
+    contact : NormalContact
+        Its gap is measured from ``reference`` (m), the approach too.
+    centroid : (float, float)
+        Pressure centroid (x̄, ȳ), m, particle frame.
+    reference : float
+        Height z (m, particle frame) of the gap's zero: the lowest (upper plate: highest) point
+        of the footprint scan.
+    plate : float
+        Height z (m) of the plate: ``reference + approach`` (lower) or ``reference − approach``
+        (upper).
+    spots : int
+        Number of separate contact spots.
+    """
 
     side: str
-    theta: float
+    orientation: tuple
     window: Window
     contact: NormalContact
     centroid: tuple[float, float]
+    reference: float
+    plate: float
+    spots: int
 
 
 class Interface:
@@ -88,97 +123,95 @@ class Interface:
     Parameters
     ----------
     side : {"lower", "upper"}
-    shape : Shape
     material : Material
     spacing : float
         Cell size Δ, m.
-    min_cells : int
-        Starting window size (cells across).
     tol : float
         Tolerance of the normal and tangential solvers.
     """
 
-    def __init__(self, side: str, shape: Shape, material: Material, spacing: float,
-                 min_cells: int = 32, tol: float = 1e-8) -> None:
+    def __init__(self, side: str, material: Material, spacing: float,
+                 tol: float = 1e-8) -> None:
         if side not in ("lower", "upper"):
             raise ValueError(f"side must be 'lower' or 'upper', got {side!r}")
-        self.side, self.shape, self.material = side, shape, material
+        self.side, self.material = side, material
+        self.index = LOWER if side == "lower" else UPPER
         self.spacing, self.tol = float(spacing), tol
-        self.cells = int(min_cells)
-        self._gap_cache: dict[tuple[float, Window], np.ndarray] = {}
         self.last: InterfaceNormal | None = None
-        self.geometry_time = 0.0
 
-    # geometry -----------------------------------------------------------------------------
-    def extreme_point(self, theta: float) -> np.ndarray:
-        """World point (x, y, z), m, where this plate first touches the particle."""
-        if self.side == "lower":
-            return self.shape.lowest_point(theta)
-        return self.shape.highest_point(theta)
+    def _bound(self, surfaces: Surfaces, force: float | None, approach: float | None) -> float:
+        """A first bound (m) on the approach, from the last solve or a Hertz estimate."""
+        floor = 2.0 * surfaces.floor_allowance(self.index) + 2.0 * self.spacing * 1e-6
+        if approach is not None:
+            return max(1.05 * approach, floor)
+        if self.last is not None and self.last.contact.force > 0:
+            # the approach grows like F^(2/3)
+            ratio = force / self.last.contact.force
+            guess = abs(self.last.contact.approach) * max(ratio, 1.0) ** (2 / 3)
+            return max(1.5 * guess, floor)
+        # Hertz with the shape's smallest curvature radius: an overestimate for a smooth body
+        radius = surfaces.shape.feature_length
+        hertz = (9 * force**2 / (16 * self.material.E_star**2 * radius)) ** (1 / 3)
+        return max(2.0 * hertz, floor)
 
-    def gap(self, theta: float, window: Window) -> np.ndarray:
-        """Initial separation (m) between plate and particle on the window (inf where missed)."""
-        key = (float(theta), window)
-        if key not in self._gap_cache:
-            start = time.perf_counter()
-            X, Y = window.grid(self.spacing).mesh()
-            fn = self.shape.gap_lower if self.side == "lower" else self.shape.gap_upper
-            if len(self._gap_cache) > 16:
-                self._gap_cache.clear()
-            self._gap_cache[key] = np.asarray(fn(theta, X, Y), dtype=float)
-            self.geometry_time += time.perf_counter() - start
-        return self._gap_cache[key]
-
-    def window_for(self, theta: float) -> Window:
-        x, y, _ = self.extreme_point(theta)
-        return Window.around(float(x), float(y), self.cells, self.spacing)
-
-    # solves -------------------------------------------------------------------------------
-    def solve_normal(self, theta: float, *, force: float | None = None,
+    def solve_normal(self, surfaces: Surfaces, *, force: float | None = None,
                      approach: float | None = None) -> InterfaceNormal:
-        """Frictionless normal contact at orientation ``theta`` (rad) under ``force`` (N) or a
-        prescribed ``approach`` (m); warm-started from the last solve at the same orientation."""
-        window = self.window_for(theta)
-        while True:
-            gap = self.gap(theta, window)
+        """Frictionless normal contact at the orientation of ``surfaces`` under ``force`` (N)
+        or ``approach`` (m, from the reference); warm-started from the last solve at the same
+        orientation. Every spot the plate can reach is in the problem (module docstring)."""
+        n = surfaces.n
+        orientation = key(surfaces.rotation)
+        bound = self._bound(surfaces, force, approach)
+        extra = np.zeros((surfaces.cells, surfaces.cells), dtype=bool)
+        warm = None
+        if self.last is not None and self.last.orientation == orientation:
+            warm = (self.last.window, self.last.contact.pressure)
+        for _ in range(_ATTEMPTS):
+            mask = surfaces.candidates(self.index, bound) | extra
+            window = _window_around(mask, n)
+            rows, cols = window.slices(n)
+            gap = surfaces.gap(self.index, mask)[rows, cols]
+            grid = window.grid(self.spacing)
             initial = None
-            if self.last is not None and self.last.theta == theta:
-                initial = remap(self.last.contact.pressure, self.last.window, window)
+            if warm is not None:
+                initial = remap(warm[1], warm[0], window)
                 if not initial.any():
                     initial = None
-            grid = window.grid(self.spacing)
             try:
-                normal = solve_normal(gap, grid, self.material, force=force, approach=approach,
-                                      tol=self.tol, initial=initial)
+                normal = solve_normal(gap, grid, self.material, force=force,
+                                      approach=approach, tol=self.tol, initial=initial)
             except ContactAtEdgeError:
-                window = self._grow(window)
+                # the window holds the whole footprint with free cells around it: only a
+                # contact over the whole particle (an approach beyond its size) gets there
+                raise ContactAtEdgeError(
+                    f"{self.side} interface: the contact spreads over the whole particle: the "
+                    "load is far beyond the half-space model's range (contact size << "
+                    "particle size)") from None
+            delta = normal.approach
+            warm = (window, normal.pressure)
+            if delta >= bound:
+                bound = max(2.0 * bound, 1.5 * delta)
                 continue
-            # cells on the window's border that could have come into contact: grow
-            border = np.concatenate([gap[0], gap[-1], gap[:, 0], gap[:, -1]])
-            if border.min() <= normal.approach:
-                window = self._grow(window)
+            # cells just outside the mask must not lie below the approach
+            ring = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool)) & ~mask
+            low = ring & (surfaces.gap(self.index, ring) <= delta)
+            if low.any():
+                k = 2 * surfaces.stride + 1
+                extra |= ndimage.binary_dilation(low, structure=np.ones((k, k), dtype=bool))
                 continue
             break
+        else:  # pragma: no cover - the bound doubles each time
+            raise RuntimeError(f"{self.side} interface: the contact cells did not settle")
+        _check_half_space(normal.contact, window, surfaces, self.side)
         p = normal.pressure
         X, Y = grid.mesh()
         total = p.sum()
         centroid = (float((p * X).sum() / total), float((p * Y).sum() / total))
-        self.last = InterfaceNormal(self.side, float(theta), window, normal, centroid)
+        reference = surfaces.reference[self.index]
+        plate = reference + delta if self.index == LOWER else reference - delta
+        self.last = InterfaceNormal(self.side, orientation, window, normal, centroid, reference,
+                                    plate, count_spots(normal.contact))
         return self.last
-
-    def _grow(self, window: Window) -> Window:
-        footprint = 2 * self.shape.size / self.spacing      # the particle's width, cells
-        if window.nx >= footprint:
-            raise ContactAtEdgeError(
-                f"{self.side} interface: the contact spreads over the whole particle "
-                f"(window {window.nx} cells of {self.spacing:.3g} m): the load is far beyond "
-                "the half-space model's range (contact size << particle size)")
-        if window.nx * 2 > _MAX_CELLS:
-            raise ContactAtEdgeError(
-                f"{self.side} interface: the contact does not fit in a {window.nx}-cell window "
-                f"(cell size {self.spacing:.3g} m); use a coarser resolution")
-        self.cells = max(self.cells, window.nx * 2)
-        return window.enlarged(2)
 
     def solve_tangential(self, solution: InterfaceNormal, mu: float, force: tuple[float, float],
                          previous: tuple[Window, TangentialContact] | None = None,
@@ -192,3 +225,35 @@ class Interface:
             prev = replace(p_step, traction=traction)
         return solve_tangential(solution.contact, mu, force=np.asarray(force, dtype=float),
                                 previous=prev, tol=self.tol)
+
+
+def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,
+                      side: str) -> None:
+    """Refuse a contact as wide as the particle: the half-space model needs contacts much
+    smaller than the particle (DESIGN.md §3)."""
+    rows = np.flatnonzero(contact.any(axis=1))
+    cols = np.flatnonzero(contact.any(axis=0))
+    extent = max(rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1) * surfaces.spacing
+    if extent > 1.5 * surfaces.shape.size:
+        raise ContactAtEdgeError(
+            f"{side} interface: the contact spreads over the whole particle ({extent:.3g} m "
+            f"across, particle size {surfaces.shape.size:.3g} m): the load is far beyond the "
+            "half-space model's range (contact size << particle size)")
+
+
+def _window_around(mask: np.ndarray, n: int) -> Window:
+    """The bounding box of ``mask`` (a (2n+1)² lattice array) with two free cells on each side,
+    widened to a multiple of 8 cells and kept inside the lattice."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    size = 2 * n + 1
+
+    def span(lo: int, hi: int) -> tuple[int, int]:
+        lo, hi = lo - 2, hi + 3
+        length = min(math.ceil((hi - lo) / _ROUND) * _ROUND, size)
+        lo = min(max(lo - (length - (hi - lo)) // 2, 0), size - length)
+        return lo, length
+
+    j0, ny = span(int(rows[0]), int(rows[-1]))
+    i0, nx = span(int(cols[0]), int(cols[-1]))
+    return Window(i0 - n, j0 - n, nx, ny)

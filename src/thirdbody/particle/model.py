@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+
+import numpy as np
 
 from .._validate import real
 from ..material import Material
+from ..orientation import Rotation, tilt
 from ..shapes import Shape
 
 __all__ = ["Particle", "Plates"]
@@ -16,6 +18,10 @@ __all__ = ["Particle", "Plates"]
 class Particle:
     """An elastic particle: a shape, its material and its initial orientation.
 
+    The orientation is a tilt (``orientation_deg`` about the horizontal axis at azimuth
+    ``tilt_axis_deg``, after a yaw of ``yaw_deg`` about the body's z axis) or a unit
+    ``quaternion`` (x, y, z, w), body to world; see :mod:`thirdbody.orientation`.
+
     Parameters
     ----------
     shape : thirdbody.shapes.Shape
@@ -23,12 +29,22 @@ class Particle:
     material : Material
         Young's modulus (Pa) and Poisson ratio of the particle; the plates are rigid.
     orientation_deg : float
-        Initial rotation θ₀ about +y (right-hand rule), degrees.
+        Initial tilt angle, degrees; about +y by default (the paper's θ₀).
+    tilt_axis_deg : float
+        Azimuth of the tilt axis, degrees from +x towards +y (default 90: the +y axis).
+    yaw_deg : float
+        Rotation about the body's z axis before the tilt, degrees.
+    quaternion : (4,) floats, optional
+        The initial orientation as a quaternion (x, y, z, w), normalised here; instead of the
+        tilt (which must then keep its defaults).
     """
 
     shape: Shape
     material: Material
     orientation_deg: float = 0.0
+    tilt_axis_deg: float = 90.0
+    yaw_deg: float = 0.0
+    quaternion: tuple[float, float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.shape, Shape):
@@ -37,13 +53,26 @@ class Particle:
         if not isinstance(self.material, Material):
             raise TypeError(f"particle.material must be a thirdbody.Material, got "
                             f"{type(self.material).__name__}")
-        real("particle.orientation_deg (degrees)", self.orientation_deg, "(-inf, inf)",
-             lambda x: True)
+        for name in ("orientation_deg", "tilt_axis_deg", "yaw_deg"):
+            value = real(f"particle.{name} (degrees)", getattr(self, name), "(-inf, inf)",
+                         lambda x: True)
+            object.__setattr__(self, name, value)
+        if self.quaternion is not None:
+            if (self.orientation_deg, self.tilt_axis_deg, self.yaw_deg) != (0.0, 90.0, 0.0):
+                raise ValueError("particle: give either a tilt (orientation_deg, tilt_axis_deg, "
+                                 "yaw_deg) or a quaternion, not both")
+            q = np.asarray(self.quaternion, dtype=float)
+            if q.shape != (4,) or not np.all(np.isfinite(q)) or not np.linalg.norm(q) > 0:
+                raise ValueError(f"particle.quaternion must be four finite numbers (x, y, z, w), "
+                                 f"not all zero, got {self.quaternion!r}")
+            object.__setattr__(self, "quaternion", tuple(float(v) for v in q / np.linalg.norm(q)))
 
     @property
-    def orientation(self) -> float:
-        """Initial orientation θ₀ in radians."""
-        return math.radians(self.orientation_deg)
+    def orientation(self) -> Rotation:
+        """Initial orientation (body -> world)."""
+        if self.quaternion is not None:
+            return Rotation.from_quat(self.quaternion)
+        return tilt(self.orientation_deg, self.tilt_axis_deg, self.yaw_deg)
 
 
 @dataclass(frozen=True)

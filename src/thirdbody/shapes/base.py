@@ -2,13 +2,13 @@
 
 Conventions (DESIGN.md §2)
 --------------------------
-* World frame: x horizontal in the plane of rotation, y horizontal (the rotation axis), z up.
-  The plates are horizontal; the lower plate touches the particle from below, the upper plate
-  from above.
+* World frame: x, y horizontal, z up. The plates are horizontal; the lower plate touches the
+  particle from below, the upper plate from above.
 * Body frame: the shape is defined with its volume centroid at the origin.
-* Orientation ``theta`` (radians in this module) is a rotation about +y by the right-hand rule:
-  a body-frame point ``(x, y, z)`` sits in the world at
-  ``(x cos θ + z sin θ, y, −x sin θ + z cos θ)``. The centroid stays at the world origin.
+* An orientation (:mod:`thirdbody.orientation`) is a rotation ``R`` (a scipy ``Rotation``): a
+  body-frame point ``p`` sits in the world at ``R p``, the centroid at the world origin. A plain
+  number θ (radians) means the paper's rotation about +y by the right-hand rule,
+  ``(x, y, z) -> (x cos θ + z sin θ, y, −x sin θ + z cos θ)``.
 * Lengths are in metres.
 
 The plates only need the shape through vertical rays: for each world point ``(x, y)`` of an
@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from thirdbody.orientation import OrientationLike, Rotation, as_rotation, key, matrix
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -35,34 +37,26 @@ __all__ = ["Shape", "rotate_to_body", "rotate_to_world"]
 
 _CACHE_SIZE = 64
 
+#: the half turn about +y: (x, y, z) -> (−x, y, −z); it swaps the roles of the two plates
+_FLIP = np.diag([-1.0, 1.0, -1.0])
 
-def rotate_to_world(points: ArrayLike, theta: float) -> FloatArray:
-    """Map body-frame points (…, 3) to the world frame for orientation ``theta`` (rad).
 
-    ``(x, y, z) -> (x cos θ + z sin θ, y, −x sin θ + z cos θ)``: a rotation about +y by the
-    right-hand rule. Units are preserved (metres).
-    """
+def rotate_to_world(points: ArrayLike, orientation: OrientationLike) -> FloatArray:
+    """Map body-frame points (…, 3) to the world frame: ``R p`` (m in, m out)."""
     p = np.asarray(points, dtype=float)
-    c, s = np.cos(theta), np.sin(theta)
-    out = np.empty(np.broadcast_shapes(p.shape, (3,)))
-    out[..., 0] = c * p[..., 0] + s * p[..., 2]
-    out[..., 1] = p[..., 1]
-    out[..., 2] = -s * p[..., 0] + c * p[..., 2]
-    return out
+    return p @ matrix(orientation).T
 
 
-def rotate_to_body(points: ArrayLike, theta: float) -> FloatArray:
+def rotate_to_body(points: ArrayLike, orientation: OrientationLike) -> FloatArray:
     """Inverse of :func:`rotate_to_world`: world-frame points (…, 3) to the body frame."""
-    return rotate_to_world(points, -theta)
+    p = np.asarray(points, dtype=float)
+    return p @ matrix(orientation)
 
 
-def _ray_frame(theta: float) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Body-frame images of the world unit vectors x, y and z (up) at orientation ``theta``."""
-    c, s = np.cos(theta), np.sin(theta)
-    ex = np.array([c, 0.0, s])
-    ey = np.array([0.0, 1.0, 0.0])
-    ez = np.array([-s, 0.0, c])
-    return ex, ey, ez
+def _ray_frame(orientation: OrientationLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Body-frame images of the world unit vectors x, y and z (up): the rows of ``R``."""
+    m = matrix(orientation)
+    return m[0].copy(), m[1].copy(), m[2].copy()
 
 
 def _broadcast_xy(x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -71,29 +65,33 @@ def _broadcast_xy(x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
 
 
 class Shape(abc.ABC):
-    """A rigid particle shape, seen through vertical rays at an orientation ``theta``.
+    """A rigid particle shape, seen through vertical rays at an orientation.
 
-    Subclasses implement :meth:`surfaces`, ``_lowest_point`` (uncached), :meth:`mirrored` and
-    :attr:`size`, and call ``super().__init__()``. The default :meth:`highest_point` uses the
-    identity ``highest(θ) = M·lowest(θ + π)`` with ``M: (x, y, z) -> (−x, y, −z)``, because
-    turning the body by π about y maps (x, z) to (−x, −z). Extreme points are cached per ``theta``
-    (shapes are immutable).
+    Every method taking an ``orientation`` accepts a scipy ``Rotation`` or a number θ (rad, the
+    paper's rotation about +y); see :mod:`thirdbody.orientation`.
+
+    Subclasses implement :meth:`surfaces`, ``_lowest_point`` (uncached, given a ``Rotation``),
+    :meth:`mirrored` and :attr:`size`, and call ``super().__init__()``. The default
+    :meth:`highest_point` uses the identity ``highest(R) = F·lowest(F R)`` with F the half turn
+    about y, ``(x, y, z) -> (−x, y, −z)``, which swaps top and bottom. Extreme points are cached
+    per orientation (shapes are immutable).
 
     All lengths are in metres, angles in radians.
     """
 
     def __init__(self) -> None:
-        self._extreme_cache: dict[tuple[str, float], FloatArray] = {}
+        self._extreme_cache: dict[tuple, FloatArray] = {}
 
     # --- to implement -----------------------------------------------------------------------
     @abc.abstractmethod
-    def surfaces(self, theta: float, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def surfaces(self, orientation: OrientationLike, x: ArrayLike,
+                 y: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Lowest and highest heights z (m) of the rotated body along vertical rays.
 
         Parameters
         ----------
-        theta:
-            Orientation (rad), rotation about +y.
+        orientation:
+            A ``Rotation`` (body -> world) or θ (rad) about +y.
         x, y:
             World horizontal coordinates (m) of the rays; any broadcastable shapes.
 
@@ -105,15 +103,15 @@ class Shape(abc.ABC):
         """
 
     @abc.abstractmethod
-    def _lowest_point(self, theta: float) -> FloatArray:
+    def _lowest_point(self, rotation: Rotation) -> FloatArray:
         """Uncached world-frame lowest point (x, y, z) in metres."""
 
     @abc.abstractmethod
     def mirrored(self) -> Shape:
         """The shape mirrored in the body x coordinate (x -> −x).
 
-        The mirrored shape at orientation −θ is the mirror image (world x -> −x) of this shape at
-        orientation θ.
+        The mirrored shape at orientation −θ (about y) is the mirror image (world x -> −x) of
+        this shape at orientation θ.
         """
 
     @property
@@ -127,54 +125,62 @@ class Shape(abc.ABC):
         """Volume centroid (m) in the body frame: zero by construction."""
         return np.zeros(3)
 
-    def _cached(self, key: str, theta: float, fn: Callable[[float], FloatArray]) -> FloatArray:
-        k = (key, float(theta))
+    @property
+    def feature_length(self) -> float:
+        """The smallest length (m) over which the surface's curvature changes much: a vertical
+        scan of the footprint at a fraction of it sees every dip a plate can touch. Default: a
+        sixteenth of :attr:`size`."""
+        return self.size / 16.0
+
+    def _cached(self, name: str, orientation: OrientationLike,
+                fn: Callable[[Rotation], FloatArray]) -> FloatArray:
+        rotation = as_rotation(orientation)
+        k = (name, key(rotation))
         hit = self._extreme_cache.get(k)
         if hit is None:
             if len(self._extreme_cache) >= _CACHE_SIZE:
                 self._extreme_cache.pop(next(iter(self._extreme_cache)))
-            hit = np.asarray(fn(float(theta)), dtype=float)
+            hit = np.asarray(fn(rotation), dtype=float)
             hit.setflags(write=False)
             self._extreme_cache[k] = hit
         return hit.copy()
 
-    def lowest_point(self, theta: float) -> FloatArray:
+    def lowest_point(self, orientation: OrientationLike) -> FloatArray:
         """World-frame point (x, y, z) in metres where the body reaches its lowest height.
 
         This is where the lower plate touches first. If several points share the minimum (for a
-        shape symmetric in y, a pair at ±y), the one with y >= 0 is returned.
+        shape symmetric in y turned about y, a pair at ±y), the one with y >= 0 is returned.
         """
-        return self._cached("low", theta, self._lowest_point)
+        return self._cached("low", orientation, self._lowest_point)
 
-    def _highest_point(self, theta: float) -> FloatArray:
-        p = self.lowest_point(theta + np.pi)
-        return np.array([-p[0], p[1], -p[2]])
+    def _highest_point(self, rotation: Rotation) -> FloatArray:
+        return _FLIP @ self.lowest_point(Rotation.from_matrix(_FLIP) * rotation)
 
-    def highest_point(self, theta: float) -> FloatArray:
+    def highest_point(self, orientation: OrientationLike) -> FloatArray:
         """World-frame point (x, y, z) in metres where the body reaches its highest height."""
-        return self._cached("high", theta, self._highest_point)
+        return self._cached("high", orientation, self._highest_point)
 
-    def height(self, theta: float) -> float:
+    def height(self, orientation: OrientationLike) -> float:
         """Vertical extent (m) of the body: the plate gap at first contact of both plates."""
-        return float(self.highest_point(theta)[2] - self.lowest_point(theta)[2])
+        return float(self.highest_point(orientation)[2] - self.lowest_point(orientation)[2])
 
-    def gap_lower(self, theta: float, x: ArrayLike, y: ArrayLike) -> FloatArray:
+    def gap_lower(self, orientation: OrientationLike, x: ArrayLike, y: ArrayLike) -> FloatArray:
         """Initial separation (m) between the lower plate at first contact and the body.
 
         ``z_low(x, y) − z_min`` at world coordinates (x, y) (m), >= 0, +inf where the ray misses
         the body. The plate touches at :meth:`lowest_point`, where the gap is zero.
         """
-        z_low, _ = self.surfaces(theta, x, y)
-        gap = np.maximum(z_low - self.lowest_point(theta)[2], 0.0)
+        z_low, _ = self.surfaces(orientation, x, y)
+        gap = np.maximum(z_low - self.lowest_point(orientation)[2], 0.0)
         return np.where(np.isnan(z_low), np.inf, gap)
 
-    def gap_upper(self, theta: float, x: ArrayLike, y: ArrayLike) -> FloatArray:
+    def gap_upper(self, orientation: OrientationLike, x: ArrayLike, y: ArrayLike) -> FloatArray:
         """Initial separation (m) between the upper plate at first contact and the body.
 
         ``z_max − z_up(x, y)`` at world coordinates (x, y) (m), >= 0, +inf where the ray misses.
         """
-        _, z_up = self.surfaces(theta, x, y)
-        gap = np.maximum(self.highest_point(theta)[2] - z_up, 0.0)
+        _, z_up = self.surfaces(orientation, x, y)
+        gap = np.maximum(self.highest_point(orientation)[2] - z_up, 0.0)
         return np.where(np.isnan(z_up), np.inf, gap)
 
     def _radial_surface(self, directions: FloatArray) -> FloatArray:

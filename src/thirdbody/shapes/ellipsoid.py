@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from thirdbody.orientation import OrientationLike, Rotation, matrix
 from thirdbody.shapes.base import FloatArray, Shape, _broadcast_xy
 
 __all__ = ["Ellipsoid", "Sphere"]
@@ -19,14 +20,16 @@ class Ellipsoid(Shape):
         ``(A, B, C)`` in metres: A along body x (in the plane of rotation), B along y (the
         rotation axis), C along body z.
 
-    At orientation θ the half-height is ``h(θ) = √(A² sin²θ + C² cos²θ)`` and the lowest point is
-    at world ``(sinθ cosθ (A² − C²)/h, 0, −h)``; the highest point is its mirror through the
-    centroid.
+    At an orientation R the world-frame quadric is ``pᵀ M p = 1`` with ``M = R D Rᵀ``,
+    ``D = diag(1/A², 1/B², 1/C²)``. The half-height is ``h = √((M⁻¹)_zz)`` and the lowest point
+    is ``−M⁻¹ e_z / h``; the highest point is its mirror through the centroid. For the paper's
+    tilt θ about y, ``h(θ) = √(A² sin²θ + C² cos²θ)`` and the lowest point is at
+    ``(sinθ cosθ (A² − C²)/h, 0, −h)``.
 
     The gaps are computed without cancellation: the quadratic of the rotated ellipsoid is written
     for the height ``g`` above the lowest point, whose constant term is the exact positive form
-    ``Δx² (cos²θ/A² + sin²θ/C²) + y²/B²`` (Δx measured from the lowest point), and the smaller
-    root is taken as ``c/(−b + √(b² − ac))``. Near the apex the gap is therefore accurate to
+    ``Q(Δx, Δy)`` of the 2x2 horizontal block of M (Δ measured from the lowest point), and the
+    smaller root is taken as ``c/(−b + √(b² − ac))``. Near the apex the gap is therefore accurate to
     machine precision *relative to the gap itself*, not only relative to the particle size.
     """
 
@@ -52,32 +55,49 @@ class Ellipsoid(Shape):
         a, b, c = (float(v) for v in self._axes)
         return f"{type(self).__name__}(semi_axes=({a!r}, {b!r}, {c!r}))"
 
-    def half_height(self, theta: float) -> float:
-        """Half of the vertical extent (m) at orientation ``theta`` (rad)."""
-        a, _, c = self._axes
-        return float(np.hypot(a * np.sin(theta), c * np.cos(theta)))
+    @property
+    def feature_length(self) -> float:
+        """Smallest semi-axis (m): an ellipsoid has one lowest and one highest point."""
+        return float(self._axes.min())
 
-    def _lowest_point(self, theta: float) -> FloatArray:
-        a, _, c = self._axes
-        h = self.half_height(theta)
-        x = np.sin(theta) * np.cos(theta) * (a * a - c * c) / h
-        return np.array([x, 0.0, -h])
+    def _quadric(self, orientation: OrientationLike) -> tuple[FloatArray, FloatArray]:
+        """World-frame quadric ``M = R D Rᵀ`` (D = diag(1/A², 1/B², 1/C²)) and its inverse."""
+        R = matrix(orientation)
+        M = (R / self._axes**2) @ R.T
+        Minv = (R * self._axes**2) @ R.T
+        return M, Minv
 
-    def _highest_point(self, theta: float) -> FloatArray:
-        return -self._lowest_point(theta) + 0.0
+    def half_height(self, orientation: OrientationLike) -> float:
+        """Half of the vertical extent (m) at an orientation: ``√((R diag(A², B², C²) Rᵀ)_zz)``."""
+        _, Minv = self._quadric(orientation)
+        return float(np.sqrt(Minv[2, 2]))
+
+    def _lowest_point(self, rotation: Rotation) -> FloatArray:
+        # the support point along −z of pᵀMp = 1: −M⁻¹e_z / √(e_zᵀ M⁻¹ e_z)
+        _, Minv = self._quadric(rotation)
+        h = np.sqrt(Minv[2, 2])
+        return np.array([-Minv[0, 2] / h + 0.0, -Minv[1, 2] / h + 0.0, -h])
+
+    def _highest_point(self, rotation: Rotation) -> FloatArray:
+        return -self._lowest_point(rotation) + 0.0
 
     def _lower_gap_and_hit(
-        self, theta: float, x: FloatArray, y: FloatArray
+        self, orientation: OrientationLike, x: FloatArray, y: FloatArray
     ) -> tuple[FloatArray, FloatArray]:
-        """Gap above the lowest point along rays at world (x, y), and the discriminant."""
-        a_, b_, c_ = self._axes
-        s, c = np.sin(theta), np.cos(theta)
-        h = self.half_height(theta)
-        x_star = s * c * (a_ * a_ - c_ * c_) / h
-        dx = x - x_star
-        qa = (s / a_) ** 2 + (c / c_) ** 2
-        qc = dx * dx * ((c / a_) ** 2 + (s / c_) ** 2) + (y / b_) ** 2
-        qb = -1.0 / h + dx * (s * c * (1.0 / c_**2 - 1.0 / a_**2))
+        """Gap above the lowest point along rays at world (x, y), and the discriminant.
+
+        With p* the lowest point, the ray (x, y, −h + g) meets the quadric where
+        ``M_zz g² + 2 g (M_xz Δx + M_yz Δy − 1/h) + Q(Δx, Δy) = 0``, Δ measured from p*, and
+        ``Q = M_xx Δx² + 2 M_xy Δx Δy + M_yy Δy² >= 0`` (p*ᵀMp* = 1 and Mp* = −e_z/h cancel
+        the rest exactly).
+        """
+        M, Minv = self._quadric(orientation)
+        h = np.sqrt(Minv[2, 2])
+        dx = x + Minv[0, 2] / h
+        dy = y + Minv[1, 2] / h
+        qa = M[2, 2]
+        qc = M[0, 0] * dx * dx + 2.0 * M[0, 1] * dx * dy + M[1, 1] * dy * dy
+        qb = -1.0 / h + M[0, 2] * dx + M[1, 2] * dy
         disc = qb * qb - qa * qc
         root = np.sqrt(np.maximum(disc, 0.0))
         # For a ray that hits, both roots are >= 0, hence qb < 0 and -qb + root > 0.
@@ -85,31 +105,32 @@ class Ellipsoid(Shape):
             gap = qc / (root - qb)
         return gap, disc
 
-    def surfaces(self, theta: float, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def surfaces(self, orientation: OrientationLike, x: ArrayLike,
+                 y: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Lowest and highest heights z (m) along vertical rays at world (x, y); NaN if missed.
 
         See :meth:`Shape.surfaces`. Closed form, accurate to machine precision.
         """
         xa, ya = _broadcast_xy(x, y)
-        h = self.half_height(theta)
-        g_low, disc = self._lower_gap_and_hit(theta, xa, ya)
+        h = self.half_height(orientation)
+        g_low, disc = self._lower_gap_and_hit(orientation, xa, ya)
         # Central symmetry: the upper surface at (x, y) is the lower one at (-x, -y), negated.
-        g_up, _ = self._lower_gap_and_hit(theta, -xa, -ya)
+        g_up, _ = self._lower_gap_and_hit(orientation, -xa, -ya)
         hit = disc >= 0.0
         z_low = np.where(hit, -h + g_low, np.nan)
         z_up = np.where(hit, h - g_up, np.nan)
         return np.fmin(z_low, z_up), np.fmax(z_low, z_up)
 
-    def gap_lower(self, theta: float, x: ArrayLike, y: ArrayLike) -> FloatArray:
+    def gap_lower(self, orientation: OrientationLike, x: ArrayLike, y: ArrayLike) -> FloatArray:
         """See :meth:`Shape.gap_lower`; closed form without cancellation near the apex."""
         xa, ya = _broadcast_xy(x, y)
-        g, disc = self._lower_gap_and_hit(theta, xa, ya)
+        g, disc = self._lower_gap_and_hit(orientation, xa, ya)
         return np.where(disc >= 0.0, np.maximum(g, 0.0), np.inf)
 
-    def gap_upper(self, theta: float, x: ArrayLike, y: ArrayLike) -> FloatArray:
+    def gap_upper(self, orientation: OrientationLike, x: ArrayLike, y: ArrayLike) -> FloatArray:
         """See :meth:`Shape.gap_upper`; closed form without cancellation near the apex."""
         xa, ya = _broadcast_xy(x, y)
-        return self.gap_lower(theta, -xa, -ya)
+        return self.gap_lower(orientation, -xa, -ya)
 
     def mirrored(self) -> Ellipsoid:
         """The ellipsoid is symmetric in x: an equal copy."""

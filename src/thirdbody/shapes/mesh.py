@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike
 
+from thirdbody.orientation import OrientationLike, Rotation
 from thirdbody.shapes.base import FloatArray, Shape, _broadcast_xy, rotate_to_world
 
 if TYPE_CHECKING:
@@ -204,16 +205,17 @@ class MeshShape(Shape):
         return MeshShape(v, self._faces[:, ::-1], name=f"mirrored {self._name}")
 
     # --- extreme points -----------------------------------------------------------------------
-    def _lowest_point(self, theta: float) -> FloatArray:
-        v = rotate_to_world(self._vertices, theta)
+    def _lowest_point(self, rotation: Rotation) -> FloatArray:
+        v = rotate_to_world(self._vertices, rotation)
         return v[np.argmin(v[:, 2])].copy()
 
-    def _highest_point(self, theta: float) -> FloatArray:
-        v = rotate_to_world(self._vertices, theta)
+    def _highest_point(self, rotation: Rotation) -> FloatArray:
+        v = rotate_to_world(self._vertices, rotation)
         return v[np.argmax(v[:, 2])].copy()
 
     # --- vertical rays ------------------------------------------------------------------------
-    def surfaces(self, theta: float, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def surfaces(self, orientation: OrientationLike, x: ArrayLike,
+                 y: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Lowest and highest crossing heights z (m) of vertical rays at world (x, y).
 
         See :meth:`Shape.surfaces`. Exact for the faceted surface (barycentric interpolation
@@ -225,7 +227,7 @@ class MeshShape(Shape):
         rx, ry = xa.ravel(), ya.ravel()
         z_low = np.full(rx.size, np.inf)
         z_up = np.full(rx.size, -np.inf)
-        tri = rotate_to_world(self._vertices, theta)[self._faces]
+        tri = rotate_to_world(self._vertices, orientation)[self._faces]
         tx, ty = tri[..., 0], tri[..., 1]
         area2 = (tx[:, 1] - tx[:, 0]) * (ty[:, 2] - ty[:, 0]) - (tx[:, 2] - tx[:, 0]) * (
             ty[:, 1] - ty[:, 0]

@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.optimize import minimize, minimize_scalar
 
+from thirdbody.orientation import OrientationLike, Rotation, as_rotation
 from thirdbody.shapes._roots import IntArray, extreme_roots
 from thirdbody.shapes.base import FloatArray, Shape, _broadcast_xy, _ray_frame
 
@@ -256,6 +257,7 @@ class Potato(Shape):
         self._volume = volume
         self._size = float(dist.max())
         r_min = float(r.min())
+        self._r_min = r_min
         self._r_ratio = float(r.max()) / r_min
         # |grad F| for F = |q|/r(q/|q|) - 1 is sqrt(1 + |grad_S log r|²)/r; 1.25 covers the
         # sampling of the maximum.
@@ -289,6 +291,12 @@ class Potato(Shape):
         """Largest distance (m) from the centroid to the surface (dense sampling)."""
         return self._size
 
+    @property
+    def feature_length(self) -> float:
+        """Half the shortest surface wavelength, π r_min / k_max, or the smallest semi-axis if
+        shorter (m)."""
+        return float(min(np.pi * self._r_min / max(self._k_max, 1.0), self._axes.min()))
+
     def __repr__(self) -> str:
         a, b, c = (float(v) for v in self._axes)
         return f"Potato(semi_axes=({a!r}, {b!r}, {c!r}), waves={list(self._waves)!r})"
@@ -321,7 +329,8 @@ class Potato(Shape):
         return self.radius(d)[..., None] * d - self._centre
 
     # --- vertical rays ------------------------------------------------------------------------
-    def surfaces(self, theta: float, x: ArrayLike, y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    def surfaces(self, orientation: OrientationLike, x: ArrayLike,
+                 y: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Lowest and highest crossing heights z (m) of vertical rays at world (x, y).
 
         See :meth:`Shape.surfaces`. Each ray is sampled on its chord through a bounding sphere,
@@ -334,12 +343,11 @@ class Potato(Shape):
         xf, yf = xa.ravel(), ya.ravel()
         z_low = np.full(xf.size, np.nan)
         z_up = np.full(xf.size, np.nan)
-        t1, _, w = _ray_frame(theta)
-        # Ray in the wave-centre frame: q(Z) = x t1 + y e_y + g + Z w (x t1 + y e_y is ⟂ w).
+        t1, t2, w = _ray_frame(orientation)
+        # Ray in the wave-centre frame: q(Z) = x t1 + y t2 + g + Z w (x t1 + y t2 is ⟂ w).
         zc = -float(w @ self._centre)
         g_perp = self._centre + zc * w
-        px = xf[:, None] * t1 + g_perp[None, :]
-        px[:, 1] += yf
+        px = xf[:, None] * t1 + yf[:, None] * t2 + g_perp[None, :]
         rho2 = np.sum(px * px, axis=1)
         inside = rho2 < self._r_bound**2
         sel = np.flatnonzero(inside)
@@ -353,7 +361,7 @@ class Potato(Shape):
             def fun(idx: IntArray, z: FloatArray, base: FloatArray = base) -> FloatArray:
                 dz = z - zc
                 return self._implicit_q(
-                    base[idx, 0] + dz * w[0], base[idx, 1], base[idx, 2] + dz * w[2]
+                    base[idx, 0] + dz * w[0], base[idx, 1] + dz * w[1], base[idx, 2] + dz * w[2]
                 )
 
             lo, hi = extreme_roots(fun, zc - hp, zc + hp, self._n_samples, self._lipschitz, xtol)
@@ -362,23 +370,26 @@ class Potato(Shape):
         return z_low.reshape(shape), z_up.reshape(shape)
 
     # --- extreme points -----------------------------------------------------------------------
-    def _lowest_z(self, theta: float, alpha: FloatArray, beta: FloatArray) -> FloatArray:
+    def _lowest_z(self, rotation: Rotation, alpha: FloatArray, beta: FloatArray) -> FloatArray:
         """World (x, y, z) (m) of the surface point in direction (α, β) from the wave centre.
 
         The direction is ``normalise(tan α · x̂ + tan β · ŷ − ẑ)`` in world axes (a gnomonic
         chart of the lower hemisphere), which is smooth where the lowest point lies.
         """
-        t1, ey, w = _ray_frame(theta)
+        t1, ey, w = _ray_frame(rotation)
         u, v = np.tan(alpha), np.tan(beta)
         norm = np.sqrt(1.0 + u * u + v * v)
         d = (u[..., None] * t1 + v[..., None] * ey - w) / norm[..., None]
         r = self.radius(d)
         x = r * u / norm - t1 @ self._centre
-        y = r * v / norm
+        y = r * v / norm - ey @ self._centre
         z = -r / norm - w @ self._centre
         return np.stack([x, y, z], axis=-1)
 
-    def _find_lower_minima(self, theta: float) -> FloatArray:
+    def _find_lower_minima(self, rotation: Rotation) -> FloatArray:
+        # turned about y only, the body's symmetry plane is the world xz-plane (y = 0)
+        _, ey, _ = _ray_frame(rotation)
+        planar = bool(np.all(ey == np.array([0.0, 1.0, 0.0])))
         n = max(121, 2 * math.ceil(8.0 * self._k_max) + 1)
         # The lowest point is seen from the wave centre within atan(r_max/r_min) of straight down
         # (for an ellipsoid, atan((A² − C²)/(2AC)) at worst); keep a factor 2 of margin.
@@ -386,7 +397,7 @@ class Potato(Shape):
         grid = np.linspace(-amax, amax, n)
         step = grid[1] - grid[0]
         al, be = np.meshgrid(grid, grid, indexing="ij")
-        zg = self._lowest_z(theta, al, be)[..., 2]
+        zg = self._lowest_z(rotation, al, be)[..., 2]
         core = zg[1:-1, 1:-1]
         is_min = np.ones(core.shape, dtype=bool)
         for di in (-1, 0, 1):
@@ -398,7 +409,7 @@ class Potato(Shape):
         scale = self._size
 
         def z_of(p: FloatArray) -> float:
-            return float(self._lowest_z(theta, np.array(p[0]), np.array(p[1]))[2])
+            return float(self._lowest_z(rotation, np.array(p[0]), np.array(p[1]))[2])
 
         found: list[FloatArray] = []
         for i, j in zip(ii[order] + 1, jj[order] + 1, strict=True):
@@ -416,8 +427,8 @@ class Potato(Shape):
                 },
             )
             a_opt, b_opt = float(res.x[0]), float(res.x[1])
-            pt = self._lowest_z(theta, np.array(a_opt), np.array(b_opt))
-            if abs(pt[1]) < 1e-6 * scale:
+            pt = self._lowest_z(rotation, np.array(a_opt), np.array(b_opt))
+            if planar and abs(pt[1]) < 1e-6 * scale:
                 # On the symmetry plane: polish in one dimension with y = 0 exactly.
                 res1 = minimize_scalar(
                     lambda a: z_of(np.array([a, 0.0])),
@@ -425,32 +436,34 @@ class Potato(Shape):
                     method="bounded",
                     options={"xatol": 1e-12},
                 )
-                pt = self._lowest_z(theta, np.array(float(res1.x)), np.array(0.0))
+                pt = self._lowest_z(rotation, np.array(float(res1.x)), np.array(0.0))
                 pt[1] = 0.0
             if all(np.linalg.norm(pt[:2] - q[:2]) > 1e-5 * scale for q in found):
                 found.append(pt)
         pts = np.array(found).reshape(-1, 3)
         # A surface point may be a local minimum of height yet hidden above another part of the
         # body (an overhang): keep only those on the lower envelope, which a plate can touch.
-        z_low, _ = self.surfaces(theta, pts[:, 0], pts[:, 1])
+        z_low, _ = self.surfaces(rotation, pts[:, 0], pts[:, 1])
         pts = pts[np.abs(z_low - pts[:, 2]) <= 1e-9 * scale]
         return pts[np.lexsort((-pts[:, 1], pts[:, 2]))]
 
-    def lower_minima(self, theta: float) -> FloatArray:
-        """Local minima of the lower surface height at orientation ``theta`` (rad).
+    def lower_minima(self, orientation: OrientationLike) -> FloatArray:
+        """Local minima of the lower surface height at an orientation (Rotation or θ in rad).
 
         Array (n, 3) of world points (x, y, z) in metres, sorted by z (lowest first). A non-convex
-        potato may have several: each is a potential contact spot of the lower plate. Minima off
-        the symmetry plane come in pairs (±y). Minima hidden from the plate by an overhang are
-        left out. The upper plate's spots are ``lower_minima(θ + π)`` mapped by
-        (x, y, z) -> (−x, y, −z).
+        potato may have several: each is a potential contact spot of the lower plate. Turned
+        about y, minima off the symmetry plane come in pairs (±y). Minima hidden from the plate
+        by an overhang are left out. The upper plate's spots are the lower ones of the
+        orientation turned by a half turn about y, mapped by (x, y, z) -> (−x, y, −z).
         """
-        return self._cached("minima", theta, self._find_lower_minima)
+        return self._cached("minima", as_rotation(orientation), self._find_lower_minima)
 
-    def _lowest_point(self, theta: float) -> FloatArray:
-        minima = self.lower_minima(theta)
+    def _lowest_point(self, rotation: Rotation) -> FloatArray:
+        minima = self.lower_minima(rotation)
         if minima.shape[0] == 0:  # pragma: no cover - the global minimum is always kept
-            raise RuntimeError(f"no lowest point found for theta={theta!r}")
+            raise RuntimeError(f"no lowest point found for {rotation.as_quat()!r}")
         p = minima[0].copy()
-        p[1] = abs(p[1])
+        _, ey, _ = _ray_frame(rotation)
+        if np.all(ey == np.array([0.0, 1.0, 0.0])):
+            p[1] = abs(p[1])    # of a ±y pair of equal minima, the one at y >= 0
         return p

@@ -1,0 +1,287 @@
+"""Turning: the first stable orientation along the way the couple turns the particle, and the
+kinematics of the turn (pure functions of the evaluated orientations).
+
+The particle is massless, so a turn runs to completion inside its load step (DESIGN.md §3). It
+turns about the horizontal axis ``e_z × F'/|F'|`` of its current couple, recomputed at every
+orientation the search visits; each leg is a rotation about a fixed axis. It stops at the first
+orientation that is *stable*:
+
+* inside the friction limit, ``|F'| <= μ_min F_N`` (it sticks there), or
+* at a *balance*: the couple along the leg changes sign (the particle would turn back), and at
+  the zero crossing the couple's remaining part, across the leg, is within what the bracket
+  resolves. With μ = 0 this is the only way to stop: the orientation where F' = 0.
+
+The search marches in legs of ``step`` (rad) and brackets every event between march points:
+
+* the couple reverses (its component along the leg, ``F'·F̂'_start``, is <= 0 at the end), or the
+  particle sticks at the end: bisect the leg to ``tol`` for the first orientation that is stable
+  or reversed, then, if it is only reversed, find the zero crossing (Illinois method) and
+  check it;
+* the demand |F'|/F_N has a local minimum between march points that comes within twice its
+  depth of μ_min (a narrow stable band between two unstable samples): search it with golden
+  sections and, if a stable orientation is found, bisect back to the first one.
+
+Kinematics: on each leg from a to b (rotation vector φ n, horizontal) a material point at
+height z moves horizontally by ``φ (z − z_P)(n_y, −n_x)`` about a pivot at height z_P: the lower
+plate (rolling about the lower contact's stick zone), the upper plate, or the centroid
+(rotation). Heights are averaged over the two ends of the leg (trapezoidal rule).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..orientation import turned
+from ..rigid import RigidState
+from .statics import Evaluation
+
+__all__ = ["Increments", "Turn", "TurningError", "find_stable_orientation", "turn_kinematics"]
+
+_GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
+
+
+class TurningError(RuntimeError):
+    """No stable orientation exists along the turn (the particle would turn for ever)."""
+
+
+@dataclass(frozen=True)
+class Turn:
+    """The outcome of a turn.
+
+    Attributes
+    ----------
+    final : Evaluation
+        The first stable orientation.
+    path : tuple[Evaluation, ...]
+        The orientations passed on the way, in order, from the start (first) to the last one
+        before ``final``; consecutive entries are joined by a rotation about the earlier one's
+        axis.
+    evaluations : int
+        Orientations evaluated (the start included).
+    balanced : bool
+        The turn ended at a balance of the couple rather than inside the friction limit.
+    """
+
+    final: Evaluation
+    path: tuple[Evaluation, ...]
+    evaluations: int
+    balanced: bool
+
+
+class _Search:
+    def __init__(self, evaluate: Callable, mu_min: float, tol: float) -> None:
+        self.evaluate_rotation = evaluate
+        self.mu_min, self.tol = mu_min, tol
+        self.count = 0
+
+    def at(self, origin: Evaluation, t: float) -> Evaluation:
+        """The orientation ``t`` (rad) along the leg that starts at ``origin``."""
+        self.count += 1
+        return self.evaluate_rotation(turned(origin.rotation, origin.axis, t))
+
+    def stable(self, ev: Evaluation) -> bool:
+        return ev.demand <= self.mu_min
+
+    def stops(self, ev: Evaluation, origin: Evaluation) -> bool:
+        return self.stable(ev) or ev.drive(origin) <= 0.0
+
+    def settle(self, origin: Evaluation, t_end: float, end: Evaluation,
+               ) -> tuple[Evaluation | None, list[Evaluation], bool]:
+        """On the leg from ``origin`` (not stable) to ``end`` at ``t_end`` (stable or
+        reversed), the first stable orientation. Returns (final or None, orientations passed,
+        balanced); None means the couple reversed at an unstable orientation from which the
+        particle turns on about a new axis: the last orientation passed is that one."""
+        passed: list[Evaluation] = []
+        lo_t, lo, hi_t, hi = 0.0, origin, t_end, end
+        while hi_t - lo_t > self.tol:
+            t = 0.5 * (lo_t + hi_t)
+            mid = self.at(origin, t)
+            if self.stops(mid, origin):
+                hi_t, hi = t, mid
+            else:
+                lo_t, lo = t, mid
+                passed.append(mid)
+        if self.stable(hi):
+            return hi, passed, False
+        # reversed, not stable: the couple along the leg crosses zero in (lo, hi)
+        _, zero = self._zero(origin, lo_t, lo, hi_t, hi)
+        if self.stable(zero):
+            return zero, passed, False
+        # resolved within the bracket: the couple across the leg is no larger than the change
+        # of F' over the bracket
+        across = abs(float(zero.demand_force @ origin.axis)) / zero.force
+        resolution = float(np.hypot(*(hi.demand_force - lo.demand_force))) / zero.force
+        if across <= resolution + 1e-12 * max(zero.demand, 1.0):
+            return zero, passed, True
+        passed.append(zero)
+        return None, passed, False
+
+    def _zero(self, origin: Evaluation, a_t: float, a: Evaluation, b_t: float,
+              b: Evaluation) -> tuple[float, Evaluation]:
+        """Illinois iterations on the couple along the leg, f(t) = F'(t)·F̂'_origin / F_N,
+        from the bracket f(a) > 0 >= f(b), to 1e-3 of the bisection tolerance."""
+        fa, fb = a.drive(origin), b.drive(origin)
+        best_t, best = (b_t, b)
+        side = 0
+        for _ in range(40):
+            if b_t - a_t <= 1e-3 * self.tol or fb == 0.0:
+                break
+            t = b_t - fb * (b_t - a_t) / (fb - fa) if fa != fb else 0.5 * (a_t + b_t)
+            if not a_t < t < b_t:
+                t = 0.5 * (a_t + b_t)
+            ev = self.at(origin, t)
+            f = ev.drive(origin)
+            best_t, best = t, ev
+            if self.stable(ev):
+                return t, ev
+            if f > 0:
+                a_t, a, fa = t, ev, f
+                if side == 1:
+                    fb *= 0.5
+                side = 1
+            else:
+                b_t, b, fb = t, ev, f
+                if side == -1:
+                    fa *= 0.5
+                side = -1
+            if abs(f) <= 1e-12:
+                break
+        return best_t, best
+
+    def dip(self, prev: Evaluation, t_prev: float, a: Evaluation, t_a: float,
+            b: Evaluation) -> tuple[Evaluation, float, Evaluation] | None:
+        """Golden-section search of the demand over the two legs prev -> a (length t_prev) and
+        a -> b (length t_a) for a stable orientation; returns (origin of its leg, its position
+        on that leg, the stable orientation) or None."""
+
+        def point(s: float) -> tuple[Evaluation, float]:
+            return (prev, s) if s < t_prev else (a, s - t_prev)
+
+        def value(s: float) -> Evaluation:
+            origin, t = point(s)
+            return self.at(origin, t) if t > 0 else origin
+
+        lo, hi = 0.0, t_prev + t_a
+        x1, x2 = lo + _GOLDEN * (hi - lo), hi - _GOLDEN * (hi - lo)
+        e1, e2 = value(x1), value(x2)
+        while hi - lo > self.tol:
+            for x, e in ((x1, e1), (x2, e2)):
+                if self.stable(e):
+                    origin, t = point(x)
+                    return origin, t, e
+            if e1.demand <= e2.demand:
+                hi, x2, e2 = x2, x1, e1
+                x1 = lo + _GOLDEN * (hi - lo)
+                e1 = value(x1)
+            else:
+                lo, x1, e1 = x1, x2, e2
+                x2 = hi - _GOLDEN * (hi - lo)
+                e2 = value(x2)
+        return None
+
+
+def find_stable_orientation(start: Evaluation, evaluate: Callable[..., Evaluation],
+                            mu_min: float, step: float, tol: float,
+                            max_turn: float = 2.0 * math.pi) -> Turn:
+    """March from ``start`` (not stable) to the first stable orientation (module docstring).
+
+    Parameters
+    ----------
+    start : Evaluation
+        The unstable orientation the turn starts from.
+    evaluate : callable
+        ``evaluate(rotation) -> Evaluation`` at the step's load.
+    mu_min : float
+        min(μ_up, μ_low): the particle sticks when |F'| <= μ_min F_N.
+    step, tol : float
+        March leg and bisection tolerance, rad.
+    max_turn : float
+        Give up (:class:`TurningError`) after turning this far, rad.
+    """
+    search = _Search(evaluate, mu_min, tol)
+    search.count = 1
+    path: list[Evaluation] = [start]
+    # lengths of the latest march legs: path[-k-1] -> path[-k] is a full leg of legs[-k]
+    legs: list[float] = []
+    a = start
+    travelled = 0.0
+    while True:
+        if travelled >= max_turn:
+            raise TurningError(
+                f"no stable orientation within {math.degrees(max_turn):.0f}° of turning: the "
+                f"couple stays above the friction limit (|F'|/F_N = {a.demand:.4g} > "
+                f"μ = {mu_min:.4g}) and never reverses")
+        b = search.at(a, step)
+        travelled += step
+        origin, t_end, end = a, step, b
+        if not search.stops(b, a):
+            if not (legs and _dip_suspected(path[-2], a, b, mu_min)):
+                path.append(b)
+                legs.append(step)
+                a = b
+                continue
+            found = search.dip(path[-2], legs[-1], a, step, b)
+            if found is None:
+                path.append(b)
+                legs.append(step)
+                a = b
+                continue
+            origin, t_end, end = found
+            if origin is not a:
+                path.pop()          # the stable band lies before a: the particle never got there
+        final, passed, balanced = search.settle(origin, t_end, end)
+        path.extend(passed)
+        if final is not None:
+            return Turn(final, tuple(path), search.count, balanced)
+        a = path[-1]                # turned back at an unstable balance: on about a new axis
+        legs = []
+
+
+def _dip_suspected(prev: Evaluation, a: Evaluation, b: Evaluation, mu_min: float) -> bool:
+    """The demand has a local minimum at ``a`` that comes within twice its depth of μ_min."""
+    if not (a.demand <= prev.demand and a.demand <= b.demand):
+        return False
+    depth = min(prev.demand, b.demand) - a.demand
+    return a.demand - mu_min < 2.0 * depth
+
+
+@dataclass(frozen=True)
+class Increments:
+    """Horizontal displacements (m, 2-vectors) accumulated along a turn: the centroid's, and
+    the particle's slip over the upper and the lower plate."""
+
+    position: np.ndarray
+    slip_up: np.ndarray
+    slip_low: np.ndarray
+
+
+def turn_kinematics(nodes: Sequence[Evaluation],
+                    classify: Callable[[Evaluation], RigidState]) -> Increments:
+    """Integrate the kinematics over consecutive orientations (module docstring).
+
+    ``classify`` gives the state on the leg that starts at an orientation: ``ROLL_LOWER``
+    pivots about the lower plate, ``ROLL_UPPER`` about the upper plate, ``ROTATE`` about the
+    centroid.
+    """
+    position, slip_up, slip_low = np.zeros(2), np.zeros(2), np.zeros(2)
+    for a, b in itertools.pairwise(nodes):
+        phi = (b.rotation * a.rotation.inv()).as_rotvec()
+        sweep = np.array([phi[1], -phi[0]])     # φ (n_y, −n_x)
+        kind = classify(a)
+        top = 0.5 * (a.up.plate + b.up.plate)
+        bottom = 0.5 * (a.low.plate + b.low.plate)
+        if kind is RigidState.ROLL_LOWER:
+            pivot = bottom
+        elif kind is RigidState.ROLL_UPPER:
+            pivot = top
+        else:
+            pivot = 0.0
+        position += sweep * (0.0 - pivot)
+        slip_up += sweep * (top - pivot)
+        slip_low += sweep * (bottom - pivot)
+    return Increments(position, slip_up, slip_low)
