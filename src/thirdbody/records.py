@@ -88,6 +88,9 @@ VARIABLES: tuple[Variable, ...] = (
     _v("twist_moment", "", "N m",
        "moment about z of the tractions of both plates about the centroid"),
     _v("twist_ratio", "", "1", "|twist_moment| / (max(mu) F_N a), a the contact radius"),
+    _v("twist_angle", "", "degree",
+       "rotation of the particle about z relative to the plates since the last turn, from "
+       "balancing twist_moment (0 when it was below twist_tol)"),
     _v("turn_evaluations", "", "1", "orientations evaluated in the step"),
     _v("time_total", "", "s", "wall time of the step"),
     _v("time_normal", "", "s", "wall time in normal solves"),

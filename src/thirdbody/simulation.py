@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from .bem import TangentialContact
+from .bem import ConvergenceError, TangentialContact
 from .checkpoint import restore, snapshot
 from .loading import LoadProgram, LoadStep
 from .orientation import Rotation, decompose
@@ -88,6 +88,11 @@ class Simulation:
     classification : {"statics", "paper"}
         How a both-interfaces-exceeded demand is read with unequal μ
         (:func:`thirdbody.rigid.classify`).
+    twist_tol : float
+        Largest twisting moment about z left unbalanced, relative to max(μ) F_N a (a the contact
+        radius); above it the particle's twist relative to the plates is solved for (``inf``:
+        never). The tilting couple's lever arms never twist (F' is parallel to the offset of the
+        pressure centroids); the tractions of non-symmetric or multi-spot contacts can.
     """
 
     #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
@@ -96,8 +101,9 @@ class Simulation:
     def __init__(self, particle: Particle, plates: Plates, load: LoadProgram, *,
                  resolution: float = 80.0, cell_size: float | None = None,
                  tol: float = 1e-8, angle_step_deg: float = 1.0, angle_tol_deg: float = 0.01,
-                 maps_every: int = 5, classification: str = "statics") -> None:
-        from ._validate import positive
+                 maps_every: int = 5, classification: str = "statics",
+                 twist_tol: float = 1e-3) -> None:
+        from ._validate import positive, real
 
         if not isinstance(particle, Particle):
             raise TypeError("particle must be a thirdbody.Particle")
@@ -121,6 +127,8 @@ class Simulation:
         self.angle_tol = math.radians(positive("angle_tol_deg (degrees)", angle_tol_deg))
         self.maps_every = maps_every
         self.classification = classification
+        self.twist_tol = math.inf if twist_tol == math.inf else real(
+            "twist_tol", twist_tol, "[0, inf]", lambda x: x >= 0)
         self.schedule: list[LoadStep] = load.schedule()
         self.d0 = shape.height(particle.orientation)
         self.statics = PairStatics(shape, particle.material, self.cell_size, self.tol)
@@ -143,7 +151,7 @@ class Simulation:
             "angle_step_deg": math.degrees(self.angle_step),
             "angle_tol_deg": math.degrees(self.angle_tol),
             "maps_every": self.maps_every, "classification": self.classification,
-            "d0": self.d0,
+            "twist_tol": self.twist_tol, "d0": self.d0,
         }
 
     @property
@@ -230,20 +238,86 @@ class Simulation:
         return record, maps
 
     def _tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
+        """Partial slip at both plates with the forces ±F'; if the tractions leave a twisting
+        moment about z above ``twist_tol`` (relative to max(μ) F_N a), the particle's twist
+        relative to the plates becomes an unknown, found by Illinois iterations on the total
+        moment (monotone in the twist)."""
         # the plates can transmit at most μ_min F_N; only a balanced turn ends beyond it
         cap = self.plates.mu_min * ev.force
         demand = ev.demand_force
         norm = math.hypot(*demand)
         if norm > cap:
             demand = demand * (cap / norm) if norm > 0 else demand
-        out = {}
-        for side, sol, sign, mu in (("low", ev.low, 1.0, self.plates.mu_low),
-                                    ("up", ev.up, -1.0, self.plates.mu_up)):
-            force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
-            t = self.interfaces[side].solve_tangential(sol, mu, force, state.history.get(side))
-            state.history[side] = (sol.window, t)
-            out[side] = t
+        sides = (("low", ev.low, 1.0, self.plates.mu_low), ("up", ev.up, -1.0, self.plates.mu_up))
+
+        def solve(twist: float | None) -> dict[str, TangentialContact]:
+            out = {}
+            for side, sol, sign, mu in sides:
+                force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
+                out[side] = self.interfaces[side].solve_tangential(
+                    sol, mu, force, state.history.get(side), twist=twist)
+            return out
+
+        out = solve(None)
+        mu_max = max(self.plates.mu_up, self.plates.mu_low)
+        radius = math.sqrt(max(ev.up.contact.area, ev.low.contact.area) / math.pi)
+        scale = mu_max * ev.force * radius
+
+        def moment(t: dict[str, TangentialContact]) -> float:
+            return t["up"].moment + t["low"].moment
+
+        m0 = moment(out)
+        if scale > 0 and abs(m0) > self.twist_tol * scale:
+            out = self._balance_twist(solve, out, m0, scale)
+        for side, sol, _, _ in sides:
+            state.history[side] = (sol.window, out[side])
         return out
+
+    def _balance_twist(self, solve, start, m0: float, scale: float):
+        """The plates' twist ω (rad) at which the moments of both plates' tractions cancel.
+
+        The first step uses the torsional stiffness of bonded discs of the contact sizes,
+        (16/3) G a³ each, an upper bound, so it falls short; the steps then grow (secant, at
+        most 4x) until the moment changes sign, and Illinois iterations close the bracket. A
+        twist at which the plates can no longer transmit F' (everything slips) is an overshoot:
+        the step is halved."""
+        G = self.particle.material.G
+        stiffness = sum(16 / 3 * G * (t.normal.area / math.pi) ** 1.5 for t in start.values())
+        tol = self.twist_tol * scale
+
+        def moment_at(w: float):
+            out = solve(w)
+            return out["up"].moment + out["low"].moment, out
+
+        a_w, a_m = start["up"].twist, m0
+        step = -m0 / stiffness
+        b_w = b_m = b_out = None
+        for _ in range(60):                 # extend until the moment changes sign
+            try:
+                b_m, b_out = moment_at(a_w + step)
+            except (ConvergenceError, ValueError):
+                step *= 0.5                 # beyond what the plates can hold: overshoot
+                continue
+            b_w = a_w + step
+            if abs(b_m) <= tol:
+                return b_out
+            if (b_m > 0) != (a_m > 0):
+                break
+            step *= min(max(a_m / (a_m - b_m), 1.0), 4.0) if a_m != b_m else 2.0
+            a_w, a_m = b_w, b_m
+        else:
+            raise ConvergenceError("the twisting moment about z could not be balanced")
+        for _ in range(40):                 # Illinois on the bracket between a and b
+            w = b_w - b_m * (b_w - a_w) / (b_m - a_m)
+            m, out = moment_at(w)
+            if abs(m) <= tol:
+                return out
+            if (m > 0) != (b_m > 0):
+                a_w, a_m = b_w, b_m
+            else:
+                a_m *= 0.5
+            b_w, b_m, b_out = w, m, out
+        raise ConvergenceError("the twisting moment about z could not be balanced")
 
     def _record(self, k: int, step: LoadStep, ev0: Evaluation, ev: Evaluation,
                 kind: RigidState, balanced: bool, start_rotation: Rotation,
@@ -303,6 +377,7 @@ class Simulation:
             moment_residual=float(np.hypot(*moment)) / (F * h),
             twist_moment=twist,
             twist_ratio=abs(twist) / (mu_max * F * radius) if mu_max > 0 else 0.0,
+            twist_angle=-math.degrees(t["up"].twist) + 0.0,
             turn_evaluations=evaluations,
             time_total=0.0, time_normal=0.0, time_tangential=0.0, time_geometry=0.0,
         )

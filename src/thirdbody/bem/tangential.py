@@ -87,6 +87,11 @@ class TangentialContact:
     converged : bool
     full_sliding : bool
         Every contact cell slides (|τ| = μp everywhere).
+    twist : float
+        Rigid rotation of the plate about the vertical axis through ``twist_centre``, rad,
+        accumulated over the steps like ``shift`` (positive counter-clockwise seen from +z).
+    twist_centre : (float, float)
+        The point (m) the twist turns about.
     """
 
     traction: np.ndarray
@@ -103,11 +108,22 @@ class TangentialContact:
     converged: bool
     full_sliding: bool
     methods: tuple[str, ...] = ("kalker_tangcg", "love1929", "dcfft")
+    twist: float = 0.0
+    twist_centre: tuple[float, float] = (0.0, 0.0)
 
     @property
     def stick_area(self) -> float:
         """Area of the stick zone, m²."""
         return float(self.stick.sum()) * self.normal.grid.cell_area
+
+    @property
+    def moment(self) -> float:
+        """Moment about the vertical axis through ``twist_centre`` of the tractions, N m
+        (positive counter-clockwise seen from +z): Σ ((x − x_c) τ_y − (y − y_c) τ_x) ΔA."""
+        X, Y = self.normal.grid.mesh()
+        xc, yc = self.twist_centre
+        return float(((X - xc) * self.traction[1] - (Y - yc) * self.traction[0]).sum()
+                     * self.normal.grid.cell_area)
 
 
 def coulomb_residual(traction: np.ndarray, slip_increment: np.ndarray, pressure: np.ndarray,
@@ -134,11 +150,12 @@ def _project_on_discs(tau: np.ndarray, limit: np.ndarray) -> np.ndarray:
 def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA: float,
                 force: np.ndarray | None, shift: np.ndarray | None, tol: float,
                 scalar: bool, max_outer: int, max_inner: int,
-                initial: np.ndarray | None = None):
+                initial: np.ndarray | None = None, rigid: np.ndarray | None = None):
     """Solve one step on a window. Returns (tau, du, ds, stick, iterations) or None.
 
     ``initial`` is a starting traction (e.g. from a coarser grid): its cells on the friction limit
-    start in the slip set with its directions.
+    start in the slip set with its directions. ``rigid`` (2, ny, nx) is a prescribed rigid
+    displacement increment of the plate on top of the uniform shift ``ds`` (a twist), m.
     """
     force_control = force is not None
     ncomp = 1 if scalar else 2
@@ -180,6 +197,7 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         return out[:, py:py + ny, px:px + nx]
 
     tau0 = tau0[:ncomp]
+    rigid = np.zeros_like(tau0) if rigid is None else rigid[:ncomp]
     k0 = K.self_terms[0]
     # cells with zero friction limit (p = 0 at the contact edge) carry no traction
     zero_limit = contact & (limit <= 0)
@@ -242,16 +260,16 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         scale = max(k0 * float(limit.max()), 1e-300)
 
         def shift_estimate(du: np.ndarray, gram=gram, project=project) -> np.ndarray:
-            # the multiplier of the force constraint: Σ P_i (ds - du_i) = 0
-            return np.linalg.lstsq(gram, project(du, False).reshape(ncomp, -1).sum(axis=1),
-                                   rcond=None)[0]
+            # the multiplier of the force constraint: Σ P_i (ds + rigid_i - du_i) = 0
+            return np.linalg.lstsq(gram, project(du - rigid, False).reshape(ncomp, -1)
+                                   .sum(axis=1), rcond=None)[0]
 
         if force_control:
             ds = shift_estimate(du)
         # symmetric diagonal scaling of the rotation dofs by (k₀ / (k₀ + c))^½: the Fourier
         # preconditioner approximates K⁻¹ but the rotations see K + c
         S = np.sqrt(k0 / (k0 + curvature)) if not scalar else 1.0
-        r = project(ds[:, None, None] - du)
+        r = project(ds[:, None, None] + rigid - du)
         # while the sets still change, an inexact solve (a fixed reduction of the residual) is
         # enough to tell which cells move next
         r_norm = float(np.abs(r).max())
@@ -281,7 +299,7 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
                 return None
             if force_control:
                 ds = shift_estimate(du)
-        w = ds[:, None, None] - du                       # relative slip of the plate
+        w = ds[:, None, None] + rigid - du               # relative slip of the plate
         norm_tau = np.sqrt((tau * tau).sum(axis=0))
         to_slip = stick & (norm_tau > limit)
         along = (w * direction).sum(axis=0)
@@ -313,7 +331,7 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
                 du_f = apply(tau_f - tau0)
                 if force_control:
                     ds = shift_estimate(du_f)
-                w_f = np.where(contact & ~zero_limit, ds[:, None, None] - du_f, 0.0)
+                w_f = np.where(contact & ~zero_limit, ds[:, None, None] + rigid - du_f, 0.0)
                 res = coulomb_residual(np.where(contact, tau_f, 0.0), w_f, limit, 1.0, k0)
                 if res <= tol or inner_tol < tol * 1e-3:
                     return tau_f, du_f, ds, stick, iterations
@@ -345,7 +363,8 @@ def _precondition_size(n: int) -> int:
 def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.ndarray,
                   limit: np.ndarray, contact: np.ndarray, force: np.ndarray | None,
                   shift: np.ndarray | None, tol: float, scalar: bool, max_outer: int,
-                  max_inner: int, initial: np.ndarray | None = None):
+                  max_inner: int, initial: np.ndarray | None = None,
+                  rigid: np.ndarray | None = None):
     """Coarse-to-fine cascade: the step is first solved (loosely) on a grid twice as coarse, whose
     traction gives this level its starting stick/slip sets and slip directions. Most of the
     active-set updates then happen where they are cheap."""
@@ -355,8 +374,10 @@ def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.nd
         c_limit = _restrict(limit)
         c_contact = (_restrict(contact.astype(float)) > 0) & (c_limit > 0)
         c_tau0 = np.stack([_restrict(t) for t in tau0])
+        c_rigid = None if rigid is None else np.stack([_restrict(r) for r in rigid])
         coarse = _solve_levels((2 * dx, 2 * dy), G, nu, c_tau0, c_limit, c_contact, force,
-                               shift, max(tol, 1e-4), scalar, max_outer, max_inner)
+                               shift, max(tol, 1e-4), scalar, max_outer, max_inner,
+                               rigid=c_rigid)
         if coarse is not None:
             # fine cells under a coarse slip cell start slipping in its direction, on their own
             # (finer) friction limit; the others take the coarse traction
@@ -372,13 +393,15 @@ def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.nd
                                       _prolong(c_tau[k], shape))
     K = tangential_operator(shape, spacing, G, nu)
     return _active_set(K, tau0, limit, contact, dx * dy, force, shift, tol, scalar, max_outer,
-                       max_inner, initial)
+                       max_inner, initial, rigid)
 
 
 def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None,
                      previous: TangentialContact | None = None, tol: float = 1e-8,
                      scalar: bool = False, max_outer: int = 60,
-                     max_iter: int = 500, _initial: np.ndarray | None = None,
+                     max_iter: int = 500, twist: float | None = None,
+                     twist_centre: tuple[float, float] = (0.0, 0.0),
+                     _initial: np.ndarray | None = None,
                      ) -> TangentialContact:
     """Solve one incremental partial-slip step on top of a normal contact solution.
 
@@ -404,6 +427,12 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     scalar : bool
         Solve for τ_x only with a box |τ_x| <= μp (the classical scalar approximation that ignores
         u_y); default False: the full x-y coupled problem with the friction disc.
+    twist : float, optional
+        Prescribed total rotation of the plate about the vertical axis through
+        ``twist_centre`` (m), rad, counter-clockwise seen from +z; default: the previous
+        step's (no increment). Its increment moves the plate by Δω (−(y − y_c), x − x_c) on
+        top of the uniform shift; the moment it needs is :attr:`TangentialContact.moment`.
+        Full sliding ignores it.
 
     Notes
     -----
@@ -429,14 +458,27 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     limit = mu * p
     FN = normal.force
     prev_shift = np.zeros(2)
+    prev_twist = 0.0
     tau0 = np.zeros((2, *grid.shape))
     if previous is not None:
         if previous.traction.shape != tau0.shape:
             raise ValueError("previous step was solved on a different grid")
         prev_shift = np.asarray(previous.shift, dtype=float)
+        prev_twist = float(previous.twist)
         tau0 = _project_on_discs(np.where(contact, previous.traction, 0.0), limit)
+    twist = prev_twist if twist is None else float(twist)
+    if not np.isfinite(twist):
+        raise ValueError(f"twist must be a finite angle in rad, got {twist!r}")
+    centre = (float(twist_centre[0]), float(twist_centre[1]))
+    rigid = None
+    if twist != prev_twist:
+        if scalar:
+            raise ValueError("scalar=True solves x-loading only: no twist")
+        X, Y = grid.mesh()
+        rigid = (twist - prev_twist) * np.stack([-(Y - centre[1]), X - centre[0]])
     K = tangential_operator(grid.shape, grid.spacing, mat.G, mat.nu)
     k0 = K.self_terms[0]
+    spin = {"twist": twist, "twist_centre": centre}
 
     if force is not None:
         Q = vec(force, "force")
@@ -449,12 +491,12 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
                 f"tangential force {Qn:.6g} N exceeds the friction limit mu*F_N = {cap:.6g} N "
                 f"(mu = {mu}, F_N = {FN:.6g} N): the contact slides")
         if Qn >= cap * (1 - 1e-12) and Qn > 0:
-            return _full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K)
+            return replace(_full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K), **spin)
         if cap == 0:
             # frictionless (μ = 0) and no force: no traction anywhere, every cell free to slip;
             # the plate's shift is undefined, so it does not move
             return _finish(normal, mu, np.zeros_like(tau0), tau0, np.zeros(2), prev_shift, K,
-                           k0, 0, tol, full=True)
+                           k0, 0, tol, full=True, spin=spin)
         ds_prescribed = None
     else:
         ds_prescribed = vec(shift, "shift") - prev_shift
@@ -470,7 +512,8 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     box = (_fast_span(rows[0], rows[-1] + 1, grid.ny), _fast_span(cols[0], cols[-1] + 1, grid.nx))
     out = _solve_levels(grid.spacing, mat.G, mat.nu, tau0[(slice(None), *box)], limit[box],
                         contact[box], Q, ds_prescribed, tol, scalar, max_outer, max_iter,
-                        None if _initial is None else _initial[(slice(None), *box)])
+                        None if _initial is None else _initial[(slice(None), *box)],
+                        None if rigid is None else rigid[(slice(None), *box)])
     failure = ("tangential solver did not converge (stick/slip set or slip directions kept "
                "changing); try a smaller load increment")
     if out is not None:
@@ -483,7 +526,8 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         if ds_prescribed is not None:
             dsv = ds_prescribed
         try:
-            return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol)
+            return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol,
+                           rigid=rigid, spin=spin)
         except ConvergenceError as exc:
             failure = str(exc)
     if Q is None:
@@ -492,11 +536,11 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     # cells or none (with ν > 0 the slip directions fan out, so every cell can slip while
     # |Q| < μF_N); find the shift that transmits Q with displacement-controlled solves
     return _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
-                           max_iter, failure)
+                           max_iter, failure, spin)
 
 
 def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer, max_iter,
-                    failure):
+                    failure, spin):
     """Force control by root finding on the shift increment: along e = Q/|Q| the transmitted
     force F(s e)·e increases monotonically with s (F is the gradient of a convex function of
     the shift), so it is bracketed and solved by the Illinois method; the perpendicular
@@ -513,12 +557,13 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         try:
             t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
                                  scalar=scalar, max_outer=max_outer, max_iter=max_iter,
-                                 _initial=warm[0])
+                                 _initial=warm[0], **spin)
         except ConvergenceError:
             if warm[0] is None:
                 raise
             t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
-                                 scalar=scalar, max_outer=max_outer, max_iter=max_iter)
+                                 scalar=scalar, max_outer=max_outer, max_iter=max_iter,
+                                 **spin)
         warm[0] = t.traction
         iterations += t.iterations
         return t
@@ -593,12 +638,15 @@ def _force_of(traction: np.ndarray, normal: NormalContact) -> np.ndarray:
     return traction.reshape(2, -1).sum(axis=1) * normal.grid.cell_area
 
 
-def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False):
+def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False,
+            rigid=None, spin=None):
     grid = normal.grid
     contact = normal.contact
     limit = mu * normal.pressure
     du = K(tau - tau0)
     w = ds[:, None, None] - du
+    if rigid is not None:
+        w = w + rigid
     w[:, ~contact] = 0.0
     norm_tau = np.hypot(tau[0], tau[1])
     slip = contact & (norm_tau >= limit * (1 - 1e-9))
@@ -612,7 +660,8 @@ def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=
         traction=tau, displacement=K(tau), shift=prev_shift + ds,
         force=tau.reshape(2, -1).sum(axis=1) * grid.cell_area, stick=stick, slip=slip,
         slip_increment=w, mu=float(mu), normal=normal, iterations=iterations,
-        residual=residual, converged=True, full_sliding=bool(full or not stick.any()))
+        residual=residual, converged=True, full_sliding=bool(full or not stick.any()),
+        **(spin or {}))
 
 
 def _full_sliding(normal, mu, e, tau0, prev_shift, K):

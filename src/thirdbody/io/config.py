@@ -76,6 +76,8 @@ class MeshShapeConfig(_Model):
     shape: Literal["mesh"]
     file: str = Field(description="STL/OBJ/PLY path, relative to the config file")
     scale: Annotated[float, Field(gt=0)] = 1.0
+    subdivisions: Annotated[int, Field(ge=0, le=5, description="Loop subdivisions")] = 0
+    max_edge: Annotated[float | None, Field(gt=0, description="m, after scale")] = None
 
 
 class Particle(_Model):
@@ -142,6 +144,8 @@ class Numerics(_Model):
     angle_tol_deg: Annotated[float, Field(gt=0, le=1)] = 0.01
     maps_every: Annotated[int, Field(ge=0)] = 5
     classification: Literal["statics", "paper"] = "statics"
+    twist_tol: Annotated[float, Field(ge=0, description="twisting moment left unbalanced, "
+                                      "relative to max(mu) F_N a")] = 1e-3
 
 
 class Config(_Model):
@@ -183,7 +187,8 @@ class Config(_Model):
             path = Path(g.file)
             if not path.is_absolute():
                 path = Path(self.base_dir) / path
-            shape = shapes.MeshShape.from_file(path, scale=g.scale)
+            shape = shapes.MeshShape.from_file(path, scale=g.scale, subdivisions=g.subdivisions,
+                                               max_edge=g.max_edge)
         pc = self.particle
         particle = tb.Particle(shape, tb.Material(pc.E, pc.nu), pc.orientation_deg,
                                pc.tilt_axis_deg, pc.yaw_deg, pc.quaternion)

@@ -215,16 +215,18 @@ class Interface:
 
     def solve_tangential(self, solution: InterfaceNormal, mu: float, force: tuple[float, float],
                          previous: tuple[Window, TangentialContact] | None = None,
-                         ) -> TangentialContact:
+                         twist: float | None = None) -> TangentialContact:
         """Partial-slip solve with the prescribed tangential force (N, on the particle) at this
-        interface, carrying the history of ``previous`` (its window and its step) when given."""
+        interface, carrying the history of ``previous`` (its window and its step) when given.
+        ``twist``: the plate's total rotation about the particle's vertical axis, rad (default:
+        the previous step's)."""
         prev = None
         if previous is not None:
             p_window, p_step = previous
             traction = remap(p_step.traction, p_window, solution.window)
             prev = replace(p_step, traction=traction)
         return solve_tangential(solution.contact, mu, force=np.asarray(force, dtype=float),
-                                previous=prev, tol=self.tol)
+                                previous=prev, tol=self.tol, twist=twist)
 
 
 def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,

@@ -12,8 +12,8 @@ the elastic displacement of a loaded half-space is positive everywhere. Each con
 {g < δ} holds a local minimum of g, possibly far from the lowest point. So the whole footprint
 is scanned first on a coarse sub-lattice (every ``stride``-th cell, about 48 samples across the
 particle and at least 4 per :attr:`~thirdbody.shapes.Shape.feature_length`). A coarse sample is a
-candidate if its gap, less a curvature allowance (a quarter of its largest second difference,
-which bounds how far a smooth surface dips between samples), is below the bound; the candidates,
+candidate if its gap, less a curvature allowance (half its largest second difference, twice
+what a quadratic surface can dip between samples), is below the bound; the candidates,
 dilated by one coarse cell and then by ``stride`` fine cells, form the mask of fine cells that
 are evaluated and handed to the solver. Everything outside the mask is +inf (cannot touch).
 After the solve, :class:`~thirdbody.particle.interface.Interface` checks that the approach stayed
@@ -141,9 +141,10 @@ class Surfaces:
 
 
 def _allowance(g: np.ndarray) -> np.ndarray:
-    """A quarter of the largest second difference (x, y and both diagonals) of the coarse gap at
-    each sample, >= 0: a parabola through three samples dips at most an eighth of it below the
-    lowest one, so this bounds the dip of a smooth surface between samples with a factor 2."""
+    """Half the largest second difference (along x, y and both diagonals) of the coarse gap at
+    each sample, >= 0. For a quadratic surface the dip below a sample within half a sample
+    spacing in x and y is at most a quarter of the second difference (reached diagonally), so
+    this bounds the dip of a smooth surface between samples with a factor 2."""
     big = np.where(np.isfinite(g), g, np.nan)
     padded = np.pad(big, 1, constant_values=np.nan)
     c = padded[1:-1, 1:-1]
@@ -152,5 +153,5 @@ def _allowance(g: np.ndarray) -> np.ndarray:
                                ((0, 2), (2, 0))):
         ny, nx = c.shape
         s = padded[a0:a0 + ny, a1:a1 + nx] + padded[b0:b0 + ny, b1:b1 + nx] - 2.0 * c
-        out = np.fmax(out, np.where(np.isnan(s), 0.0, 0.25 * s))
+        out = np.fmax(out, np.where(np.isnan(s), 0.0, 0.5 * s))
     return np.where(np.isfinite(g), np.maximum(out, 0.0), 0.0)
