@@ -2,14 +2,15 @@
 #               `make test`  (sets up .venv, runs ruff and the whole test suite)
 # More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
 #               `make sweep` (a 20-case sweep on a local dask cluster),
-#               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`
+#               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`,
+#               `make mutation` (mutmut over the particle physics)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
 .PHONY: demo hertz fig2 fig3 fig4 fig5 sweep test test-fast lint bench bench-tangential \
-	bench-simulation bench-sweep clean venv
+	bench-simulation bench-sweep mutation clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -17,6 +18,10 @@ $(BIN)/activate:
 
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/activate
 	$(BIN)/pip install --quiet -e ".[test]"
+	touch $@
+
+$(VENV)/.installed-mutation: pyproject.toml | $(BIN)/activate
+	$(BIN)/pip install --quiet -e ".[test,mutation]"
 	touch $@
 
 $(VENV)/.installed-bench: pyproject.toml | $(BIN)/activate
@@ -64,5 +69,10 @@ bench-simulation: $(VENV)/.installed-test
 bench-sweep: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/sweep_throughput.py --md benchmarks/results/sweep_throughput.md
 
+# mutation testing of the particle physics ([tool.mutmut] in pyproject.toml); hours on 2 cores
+mutation: $(VENV)/.installed-mutation
+	$(BIN)/mutmut run --max-children 2 || true
+	$(BIN)/mutmut results
+
 clean:
-	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache
+	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache mutants

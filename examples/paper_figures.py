@@ -4,7 +4,11 @@
   particle sticks at first contact (|ξ| < μ) and, as the contacts grow unevenly over the wavy
   surface, turns several times during compression.
 * ``--figure 4``: the same with μ = 0.3 and μ = 0.2 (below |ξ| at the initial orientation): the
-  particle turns at first contact, further for the smaller μ, then sticks.
+  particle turns at first contact, further for the smaller μ, then sticks. A third run,
+  ``mu0.2_sign_change``, is the paper's Fig. 4(b) observation: another potato (seed 62) turns
+  9° at first contact with μ = 0.2, sticks for the whole compression, and its tangential
+  force changes sign at 2.3 N (5.4 % compression), as a second bump of the lower surface
+  takes load.
 * ``--figure 5``: μ_up = 0.2, μ_low = 0.4, the load held constant and then ramped: the
   particle rolls about the lower contact (the upper one slides) until it is stable, then is
   compressed without turning.
@@ -21,8 +25,9 @@ Usage::
 
     python examples/paper_figures.py --figure 3 --out out/fig3 [--resolution 80] [--steps 30]
 
-Writes ``state.png``/``.pdf`` (F_T/(μF_N) against compression), ``orientation.png``,
-``contact_maps.png`` and ``summary.txt`` (one line per step) into ``--out``.
+Writes ``results.nc`` (the dataset), ``state.png``/``.pdf`` (F_T/(μF_N) against compression),
+``orientation.png``, ``contact_maps.png`` and ``summary.txt`` (one line per step) into
+``--out``.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ import time
 from pathlib import Path
 
 import thirdbody as tb
+from thirdbody.io import write_results
 from thirdbody.plot import save_all
 from thirdbody.records import orientation_label
 from thirdbody.shapes import Potato
@@ -46,11 +52,12 @@ PARTICLES = {
     3: (4, 0.10, (4.0, 8.0), 20.0),       # sticks, turns as the contacts grow, a bump lands
     4: (27, 0.055, (2.0, 4.0), -41.0),    # |ξ(θ₀)| = 0.39: turns at first contact, then sticks
     5: (27, 0.055, (2.0, 4.0), -41.0),    # the Fig. 4 particle
+    "4c": (62, 0.10, (4.0, 8.0), 8.0),    # μ = 0.2: turns 9.3°, sticks, F_T changes sign
 }
 SEED, AMPLITUDE, WAVENUMBERS, THETA0 = PARTICLES[3]
 
 
-def potato(figure: int = 3) -> Potato:
+def potato(figure: int | str = 3) -> Potato:
     seed, amplitude, wavenumbers, _ = PARTICLES[figure]
     return Potato(SEMI_AXES, seed=seed, amplitude=amplitude, wavenumber_range=wavenumbers)
 
@@ -61,7 +68,8 @@ def cases(figure: int, steps: int) -> list[tuple[str, tb.Plates, object]]:
     if figure == 3:
         return [("mu0.46", tb.Plates(0.46), ramp)]
     if figure == 4:
-        return [("mu0.3", tb.Plates(0.3), ramp), ("mu0.2", tb.Plates(0.2), ramp)]
+        return [("mu0.3", tb.Plates(0.3), ramp), ("mu0.2", tb.Plates(0.2), ramp),
+                ("mu0.2_sign_change", tb.Plates(0.2), ramp)]
     if figure == 5:
         hold = tb.HoldThenRamp(hold=F_MAX / steps, hold_steps=max(steps // 8, 2), stop=F_MAX,
                                ramp_steps=steps)
@@ -70,7 +78,7 @@ def cases(figure: int, steps: int) -> list[tuple[str, tb.Plates, object]]:
 
 
 def run_case(name: str, plates: tb.Plates, load, resolution: float, out: Path,
-             maps_every: int, figure: int = 3) -> object:
+             maps_every: int, figure: int | str = 3) -> object:
     particle = tb.Particle(potato(figure), MATERIAL, PARTICLES[figure][3])
     sim = tb.Simulation(particle, plates, load, resolution=resolution, maps_every=maps_every)
     start = time.perf_counter()
@@ -84,6 +92,7 @@ def run_case(name: str, plates: tb.Plates, load, resolution: float, out: Path,
     ds = sim.run(progress=progress)
     elapsed = time.perf_counter() - start
     out.mkdir(parents=True, exist_ok=True)
+    write_results(ds, out / "results.nc")
     save_all(ds, out)
     with open(out / "summary.txt", "w") as f:
         f.write(f"# {name}: {sim.status}; {elapsed:.1f} s; cell size {sim.cell_size:.3g} m\n")
@@ -112,8 +121,9 @@ def main(argv: list[str] | None = None) -> dict[str, object]:
     results = {}
     for name, plates, load in cases(args.figure, args.steps):
         out = args.out if len(cases(args.figure, args.steps)) == 1 else args.out / name
+        particle = "4c" if name.endswith("sign_change") else args.figure
         results[name] = run_case(name, plates, load, args.resolution, out, args.maps_every,
-                                 args.figure)
+                                 particle)
     return results
 
 

@@ -7,6 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import thirdbody
+
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
@@ -68,3 +70,25 @@ def test_paper_figure5_example_runs(tmp_path):
         for ext in ("png", "pdf"):
             assert (tmp_path / f"{name}.{ext}").stat().st_size > 1000
     assert (tmp_path / "summary.txt").read_text().count("\n") == ds.sizes["step"] + 2
+
+
+def test_fig4c_turns_once_then_its_tangential_force_changes_sign():
+    """The bundled Fig. 4(b) sign-change example, coarsened (50 cells per size, 10 steps): it
+    turns at first contact only, sticks, and F' reverses (its component along the first F'
+    becomes negative) while the lower plate touches in two spots."""
+    from thirdbody.io import load_config
+    from thirdbody.simulation import Simulation
+
+    config = load_config(Path(thirdbody.__file__).parent / "examples" / "fig4c.toml")
+    particle, plates, _, numerics = config.build()
+    numerics.update(resolution=50.0, maps_every=0)
+    sim = Simulation(particle, plates, thirdbody.LinearRamp(stop=10.0, steps=10), **numerics)
+    ds = sim.run()
+    assert sim.status == "complete"
+    assert ds.turned.values.tolist() == [1] + [0] * 9
+    assert 8.0 < float(ds.rotation_angle[0]) < 10.5
+    force = ds.tangential_force.transpose("step", "component").values
+    along = force @ (force[0] / np.linalg.norm(force[0]))
+    assert along[1] > 0 and along[-1] < 0                       # it changes sign
+    assert (ds.ratio.values[1:] < 1).all()                      # sticking all along
+    assert int(ds.spots.sel(interface="lower")[-1]) == 2

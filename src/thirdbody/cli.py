@@ -237,6 +237,13 @@ def examples_copy(name: Annotated[str, typer.Argument(help="example name")],
     target = directory / f"{name}{found[name].suffix}"
     shutil.copyfile(found[name], target)
     typer.echo(str(target))
+    if found[name].suffix == ".toml":       # a mesh file next to the configuration goes along
+        import tomllib
+
+        mesh = tomllib.loads(found[name].read_text()).get("particle", {}).get("file")
+        if mesh and not Path(mesh).is_absolute():
+            shutil.copyfile(found[name].parent / mesh, directory / mesh)
+            typer.echo(str(directory / mesh))
 
 
 @app.command()

@@ -44,6 +44,21 @@ def _title(ds) -> str:
     return f"E = {i.get('E', nan) / 1e9:g} GPa, ν = {i.get('nu', nan):g}, {mu}, {start}"
 
 
+def _initial_tilt(ds) -> np.ndarray:
+    """The tilt vector (degrees) of the run's initial orientation, from its inputs."""
+    from scipy.spatial.transform import Rotation
+
+    q = _inputs(ds).get("quaternion")
+    if q is None:
+        return np.zeros(2)
+    b = Rotation.from_quat(q).apply([0.0, 0.0, 1.0])
+    horizontal = float(np.hypot(b[0], b[1]))
+    if horizontal == 0:
+        return np.zeros(2)
+    angle = np.degrees(np.arctan2(horizontal, b[2]))
+    return angle * np.array([-b[1], b[0]]) / horizontal
+
+
 def _planar(ds) -> bool:
     """Every orientation and turn of the run is about the y axis (the paper's case)."""
     return bool(np.all(np.abs(ds.orientation.sel(component="x").values) < 1e-9)
@@ -131,31 +146,35 @@ def orientation_history(ds):
         a1.set_ylabel("orientation (°)")
         a1.legend(fontsize=8)
     components = ("x",) if planar else ("x", "y")
-    styles = {"x": "-", "y": "-."}
+    styles = {"x": ("-", "--", ":"), "y": ("-.", (0, (3, 1, 1, 1)), (0, (1, 3)))}
     for comp in components:
-        suffix = f" {comp}"
-        a2.plot(c, ds.position.sel(component=comp).values * 1e6, "o" + styles[comp], ms=3,
-                color="tab:green", label="centroid" + suffix)
+        suffix = f" {comp}" if not planar else ""
+        centroid, upper, lower = styles[comp]
+        a2.plot(c, ds.position.sel(component=comp).values * 1e6, marker="o", ms=3,
+                linestyle=centroid, color="tab:green", label="centroid" + suffix)
         a2.plot(c, ds.slip.sel(interface="upper", component=comp).values * 1e6,
-                "--" if comp == "x" else (0, (3, 1, 1, 1)), color="tab:blue",
-                label="slip, upper" + suffix)
+                linestyle=upper, color="tab:blue", label="slip, upper" + suffix)
         a2.plot(c, ds.slip.sel(interface="lower", component=comp).values * 1e6,
-                ":" if comp == "x" else (0, (1, 3)), color="tab:red", label="slip, lower" + suffix)
+                linestyle=lower, color="tab:red", label="slip, lower" + suffix)
     a2.set_ylabel("displacement (µm)")
     a2.set_xlabel("compression (d₀ − h)/d₀")
     a2.legend(fontsize=7, ncols=2)
     a1.set_title(_title(ds), fontsize=9)
     if not planar:
-        a3.plot(tilt[:, 0], tilt[:, 1], "o-", ms=3, color="0.4", label="tilt vector")
+        start = _initial_tilt(ds)
+        path = np.vstack([start[None, :], tilt])
+        a3.plot(path[:, 0], path[:, 1], "o-", ms=3, color="0.4", label="tilt vector")
+        a3.plot(*start, "s", ms=6, color="0.2", label="start")
         turned = np.flatnonzero(ds.turned.values.astype(bool))
         rot = ds.rotation.transpose("step", "component").values
         for k in turned:
-            a3.annotate("", xy=(tilt[k, 0], tilt[k, 1]),
-                        xytext=(tilt[k, 0] - rot[k, 0], tilt[k, 1] - rot[k, 1]),
+            a3.annotate("", xy=tuple(path[k + 1]), xytext=tuple(path[k]),
                         arrowprops={"arrowstyle": "->", "color": "tab:red", "lw": 1.5})
-            a3.annotate(f"{k}", (tilt[k, 0], tilt[k, 1]), textcoords="offset points",
-                        xytext=(4, 4), fontsize=7, color="tab:red")
-        a3.plot([], [], color="tab:red", label="turn (rotation vector) in a step")
+            azimuth = np.degrees(np.arctan2(rot[k, 1], rot[k, 0]))
+            a3.annotate(f"{k}: {np.hypot(*rot[k]):.1f}° about {azimuth:.0f}°", tuple(path[k + 1]),
+                        textcoords="offset points", xytext=(4, -10), fontsize=7,
+                        color="tab:red")
+        a3.plot([], [], color="tab:red", label="turn in step k: angle about the axis azimuth")
         a3.axhline(0, color="0.8", lw=0.8)
         a3.axvline(0, color="0.8", lw=0.8)
         a3.set_aspect("equal", adjustable="datalim")
@@ -214,12 +233,20 @@ def contact_maps(ds, steps: list[int] | None = None):
     x_all = ds.map_x.values * 1e6
     y_all = ds.map_y.values * 1e6
     spacing = float(x_all[1] - x_all[0]) if x_all.size > 1 else 1.0
-    fig, axes = plt.subplots(len(steps), 4, figsize=(12, 3.0 * len(steps) + 0.6),
-                             squeeze=False, constrained_layout=True)
+    boxes = {side: _extent(ds, side) for side in ("upper", "lower")}
+    aspect = {side: min(max((len(range(*c.indices(x_all.size))) + 1)
+                            / (len(range(*r.indices(y_all.size))) + 1), 0.6), 4.0)
+              for side, (r, c) in boxes.items()}
+    widths = [aspect["upper"]] * 2 + [aspect["lower"]] * 2
+    unit = min(3.2, 13.0 / sum(widths))          # inches per unit of panel aspect
+    fig, axes = plt.subplots(len(steps), 4, figsize=(unit * sum(widths) + 1.2,
+                                                     (unit + 0.9) * len(steps) + 0.8),
+                             squeeze=False, constrained_layout=True,
+                             gridspec_kw={"width_ratios": widths})
     status_map = ListedColormap(_STATUS_COLOURS)
     pmax = float(ds.pressure.max()) / 1e6
     for col, (side, where) in enumerate((("upper", "upper"), ("lower", "lower"))):
-        rows, cols = _extent(ds, side)
+        rows, cols = boxes[side]
         x, y = x_all[cols], y_all[rows]
         extent = (x[0] - spacing / 2, x[-1] + spacing / 2, y[0] - spacing / 2,
                   y[-1] + spacing / 2)

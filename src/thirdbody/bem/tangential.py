@@ -598,7 +598,7 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         raise ConvergenceError(f"{failure}; no shift transmits the force")
     ftol = max(tol, 1e-12) * q
     f_lo = -q + float(_force_of(tau0, normal) @ e) if lo == 0.0 else f_lo
-    for _ in range(3):                      # perpendicular corrections
+    for _ in range(10):                     # perpendicular corrections (secant)
         best, side = t_hi, 0
         for _ in range(100):                # regula falsi, Illinois-modified
             if abs(along(best)) <= ftol:
@@ -627,10 +627,21 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         if slope == 0:
             break
         s_perp -= perp / slope
-        lo, hi = 0.0, 2 * s_best
-        f_lo = -q
-        t_hi = solve(hi, s_perp)
-        f_hi = along(t_hi)
+        # re-bracket the force along e near the last root: a small step out, doubling
+        t_mid = solve(s_best, s_perp)
+        f_mid = along(t_mid)
+        step = 0.02 * s_best * (1.0 if f_mid < 0 else -1.0)
+        far, t_far = s_best + step, None
+        for _ in range(40):
+            t_far = solve(far, s_perp)
+            if (along(t_far) < 0) != (f_mid < 0):
+                break
+            step *= 2.0
+            far = max(s_best + step, 0.0)
+        (lo, f_lo, _), (hi, f_hi, t_hi) = sorted(
+            [(s_best, f_mid, t_mid), (far, along(t_far), t_far)], key=lambda x: x[1])
+        if f_lo > 0 or f_hi < 0:
+            break
     raise ConvergenceError(f"{failure}; the shift search did not converge either")
 
 
