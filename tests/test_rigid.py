@@ -231,3 +231,36 @@ def test_ellipsoid_invalid():
         rigid.ellipsoid_equilibrium_angle(2.0, 1.0, 0.5, -0.1)
     with pytest.raises(ValueError, match=r"^theta0"):
         rigid.ellipsoid_equilibrium_angle(2.0, 1.0, math.inf, 0.1)
+
+
+def test_classify_tolerance_and_range_boundaries():
+    """μ_rtol decides when unequal coefficients count as equal (rotation) and may be 0; the
+    allowed ranges include their closed ends (ξ = 0, μ = 0) and messages give the range."""
+    assert rigid.classify(0.5, 0.3, 0.3001, mu_rtol=1e-3) is RigidState.ROTATE
+    assert rigid.classify(0.5, 0.3, 0.3001) is RigidState.ROLL_LOWER
+    assert rigid.classify(0.5, 0.3001, 0.3, mu_rtol=0.0) is RigidState.ROLL_UPPER
+    assert rigid.classify(0.0, 0.0, 0.0) is RigidState.STICK
+    with pytest.raises(ValueError, match=r"mu_rtol must be a finite number in \[0, inf\)"):
+        rigid.classify(0.1, 0.3, 0.3, mu_rtol=-1.0)
+    with pytest.raises(ValueError, match=r"xi must be a finite number in \[0, inf\)"):
+        rigid.classify(-0.1, 0.3, 0.3)
+
+
+def test_ellipsoid_helpers_take_scalars_to_floats_and_refuse_flat_ellipses():
+    assert type(rigid.ellipsoid_xi(2.0, 1.0, 0.3)) is float
+    assert type(rigid.ellipsoid_gap(2.0, 1.0, 1)) is float
+    assert rigid.ellipsoid_force_ratio(2.0, 1.0, 0) == 0.0
+    (x_up, z_up), _ = rigid.ellipsoid_contact_points(2.0, 1.0, 1)
+    assert type(x_up) is float and z_up > 0
+    with pytest.raises(ValueError, match=r"^C must be a finite number in \(0, inf\)"):
+        rigid.ellipsoid_xi(1.0, 0.0, 0.1)
+    with pytest.raises(ValueError, match=r"^A must be a finite number in \(0, inf\)"):
+        rigid.ellipsoid_gap(-1.0, 1.0, 0.1)
+    # a frictionless lower plate is allowed: the particle turns flat
+    assert rigid.ellipsoid_equilibrium_angle(2.0, 1.0, 0.5, 0.3, mu_low=0.0) == \
+        pytest.approx(0.0, abs=1e-12)
+    assert rigid.force_ratio((0.1, 0.0, 1.0), (0.0, 0.0, 0.0)) == pytest.approx(0.1)
+    with pytest.raises(ValueError, match="upper_point must lie above lower_point"):
+        rigid.force_ratio((0.0, 0.0), (0.0, 1.0))
+    with pytest.raises(ValueError, match=r"^lower_point must be a finite point"):
+        rigid.force_ratio((0.0, 1.0), (0.0, math.nan))

@@ -90,6 +90,10 @@ def test_upright_ellipsoid_has_no_moment_and_elliptic_hertz_spots():
 def test_equilibrium_coulomb_and_contact_at_every_step():
     sim, ds = run(20.0, mu=0.3, E=10e9, load=tb.LinearRamp(stop=0.5, steps=3), resolution=150)
     assert sim.status == "complete"
+    # a stick step evaluates one orientation and is no balance
+    stuck = ds.turned.values == 0
+    assert stuck.any() and (ds.turn_evaluations.values[stuck] == 1).all()
+    assert (ds.balanced.values == 0).all() and (ds.turn_evaluations.values[~stuck] > 2).all()
     assert (ds.force_residual < 1e-8).all()
     assert (ds.tangential_force_residual < 1e-7).all()
     assert (ds.moment_residual < 1e-7).all()
@@ -138,6 +142,25 @@ def test_rolling_about_the_higher_friction_interface():
     assert abs(float(ds.position.sel(component="x")[0])) > 0
     assert float(ds.ratio.sel(interface="upper")[0]) == pytest.approx(1.0, abs=0.01)
     assert float(ds.ratio.sel(interface="lower")[0]) == pytest.approx(0.5, abs=0.01)
+
+
+def test_the_papers_reading_of_eq_11_rotates_where_statics_rolls():
+    """μ_up = 0.2 and μ_low = 0.25, both below ξ(20°): statics says the particle rolls on the
+    lower plate (it can hold 0.25 F_N, the upper only 0.2), the paper's eq 11 read literally
+    says it rotates about its centroid: no slip at the lower plate in the first; in the second
+    the lower plate slips the opposite way while the demand is above both coefficients (at
+    the end of the turn, between them, it rolls on the lower plate too)."""
+    statics = run(20.0, mu=0.2, mu_low=0.25, load=tb.ForceTable([0.5]), maps_every=0)[1]
+    paper = run(20.0, mu=0.2, mu_low=0.25, load=tb.ForceTable([0.5]), maps_every=0,
+                classification="paper")[1]
+    names = statics.state.attrs["flag_meanings"].split()
+    assert names[int(statics.state[0])] == "roll_lower"
+    assert names[int(paper.state[0])] == "rotate"
+    assert float(statics.slip.sel(interface="lower", component="x")[0]) == 0.0
+    slip = paper.slip.sel(component="x").isel(step=0)
+    assert float(slip.sel(interface="lower")) * float(slip.sel(interface="upper")) < 0
+    # the same turn either way: the orientation does not depend on the pivot
+    np.testing.assert_array_equal(paper.orientation.values, statics.orientation.values)
 
 
 def test_gap_control_meets_the_prescribed_compression():
@@ -332,6 +355,17 @@ def test_force_and_moment_balance_from_the_stored_maps():
                 "component", ...).values
             assert p.sum() * dA == pytest.approx(F, rel=1e-9)
             centroid[side] = np.array([(p * X).sum(), (p * Y).sum()]) / p.sum()
+            # the maps sit where the solver put them: their centroids are the recorded ones
+            np.testing.assert_allclose(centroid[side],
+                                       ds.centroid.isel(step=k).sel(interface=side).values,
+                                       rtol=1e-9, atol=1e-12 * float(ds.plate_gap[k]))
+            # status: 0 open (no pressure), 1 stick (inside the friction disc), 2 slip (on it)
+            status = ds.status.isel(map_step=k).sel(interface=side).values
+            norm = np.hypot(*ds.traction.isel(map_step=k).sel(interface=side).transpose(
+                "component", ...).values)
+            assert ((status == 0) == (p == 0)).all()
+            assert (norm[status == 2] >= 0.25 * p[status == 2] * (1 - 1e-9)).all()
+            assert (norm[status == 1] < 0.25 * p[status == 1]).all()
             force[side] = tau.reshape(2, -1).sum(axis=1) * dA
             assert (np.hypot(*tau) <= 0.25 * p * (1 + 1e-12) + 1e-300).all()
         demand = ds.tangential_force.isel(step=k).values
@@ -450,3 +484,47 @@ def test_oblique_tilt_reproduces_the_rigid_ratio_vector():
         assert int(ds.state[0]) == 0
         errors.append(float(np.hypot(*(ratio - rigid_ratio)) / np.hypot(*rigid_ratio)))
     assert errors[0] < 5e-3 and errors[1] < errors[0]      # measured 3.9e-3 at 100 cells
+
+
+def test_preflight_measures_the_contact_and_refuses_a_coarse_resolution():
+    """The largest load's contact at the initial orientation: its extent in cells is what the
+    resolution check uses; too few cells are refused naming `resolution` and the minimum."""
+    sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), tb.Material(1e9, 0.3), 20.0),
+                        tb.Plates(0.6), tb.LinearRamp(stop=1.0, steps=2), resolution=100)
+    extent = sim.preflight()
+    ds = sim.run()
+    assert ds.rotation_angle.values.max() == 0           # sticks: the last step is the same
+    widths = []
+    for side in ("upper", "lower"):
+        touched = ds.pressure.isel(map_step=-1).sel(interface=side).values > 0
+        rows, cols = np.flatnonzero(touched.any(axis=1)), np.flatnonzero(touched.any(axis=0))
+        widths += [rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1]
+    # the preflight's extent is the widest contact at the largest load, in cells
+    assert extent == max(widths)
+    coarse = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), STEEL, 20.0), tb.Plates(0.6),
+                           tb.LinearRamp(stop=0.1, steps=2), resolution=20)
+    with pytest.raises(ValueError, match=r"resolution .* too coarse.*use at least"):
+        coarse.preflight()
+
+
+def test_a_run_resumed_from_a_snapshot_ends_as_an_uninterrupted_one():
+    """Checkpointing: a snapshot after step 1, restored into a fresh simulation, continues to
+    the same results (wall times aside) as the run that was never stopped."""
+    def make():
+        return tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), tb.Material(1e9, 0.3), 20.0),
+                             tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=4), resolution=60,
+                             maps_every=2)
+
+    straight = make().run()
+    first = make()
+    blobs = []
+    first.run(checkpoint=lambda sim, state: blobs.append(sim.snapshot(state)))
+    _, next_step = make().restore(blobs[1])
+    assert next_step == 2
+    ds = make().run(resume_from=blobs[1])
+    timing = [v for v in ds.data_vars if v.startswith("time_")]
+    assert ds.drop_vars(timing).identical(straight.drop_vars(timing))
+    other = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), tb.Material(1e9, 0.3), 21.0),
+                          tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=4), resolution=60)
+    with pytest.raises(ValueError, match="different inputs"):
+        other.restore(blobs[1])

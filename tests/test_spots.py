@@ -178,3 +178,20 @@ def test_an_approach_beyond_the_first_bound_widens_the_problem(monkeypatch):
     shape = TwoDips(0.5e-3, (3e-4, 1e-4), 1e-4, 2e-5, 1e-3)
     ev = compare(shape, Rotation.identity(), 1e-5, 10.0)
     assert ev.low.spots == 2
+
+
+def test_remap_moves_fields_between_lattice_windows():
+    """Fields move between windows by their integer offsets; cells not covered are zero."""
+    from thirdbody.particle.interface import Window, remap
+
+    source = Window(3, -2, 4, 3)                    # cells i = 3..6, j = -2..0
+    field = np.arange(12.0).reshape(3, 4) + 1.0
+    target = Window(5, -1, 5, 4)                    # cells i = 5..9, j = -1..2
+    out = remap(np.stack([field, -field]), source, target)
+    expected = np.zeros((4, 5))
+    expected[0:2, 0:2] = field[1:3, 2:4]            # overlap i = 5..6, j = -1..0
+    np.testing.assert_array_equal(out[0], expected)
+    np.testing.assert_array_equal(out[1], -expected)
+    assert not remap(field, source, Window(7, -2, 2, 2)).any()      # side by side: no overlap
+    assert not remap(field, source, Window(3, 1, 4, 2)).any()
+    np.testing.assert_array_equal(remap(field, source, source), field)

@@ -19,13 +19,14 @@ from thirdbody.rigid import RigidState
 STEP, TOL = math.radians(1.0), math.radians(0.01)
 
 
-def evaluator(field):
-    """evaluate(R) with F_N = 1 N and F'(R) = field(R) (N); no contact fields."""
+def evaluator(field, force=1.0):
+    """evaluate(R) with F_N = ``force`` (N) and F'(R)/F_N = field(R); no contact fields."""
     calls = []
 
     def evaluate(rotation):
         calls.append(rotation)
-        return Evaluation(rotation, 1.0, 1.0, None, None, np.asarray(field(rotation), float))
+        return Evaluation(rotation, force, 1.0, None, None,
+                          force * np.asarray(field(rotation), float))
 
     return evaluate, calls
 
@@ -59,8 +60,9 @@ def start(evaluate, rotation):
 def test_turns_to_the_friction_limit_of_a_restoring_couple():
     """F' = −sin(tilt)·(tilt direction): stable where sin(tilt) <= μ, reached from above."""
     mu = 0.3
-    evaluate, _ = evaluator(lambda r: -r.apply([0.0, 0.0, 1.0])[:2])
+    evaluate, calls = evaluator(lambda r: -r.apply([0.0, 0.0, 1.0])[:2])
     turn = find_stable_orientation(start(evaluate, about_y(40.0)), evaluate, mu, STEP, TOL)
+    assert turn.evaluations == len(calls)              # the start included
     edge = math.asin(mu)
     assert edge - TOL <= theta_of(turn.final.rotation) <= edge
     assert turn.final.demand <= mu and not turn.balanced
@@ -91,13 +93,17 @@ def test_without_friction_the_particle_turns_to_the_balance():
     assert turn.balanced and turn.final.demand < 1e-7
 
 
-def test_a_dip_of_the_couple_between_march_points_is_found():
-    """F'_x = 0.5 − 0.45 exp(−((θ − 3.3°)/0.5°)²), μ = 0.1: never reverses, and the only stable
-    orientations, |θ − 3.3°| <= 0.172°, lie between the march points 3° and 4°."""
-    mu, centre, width = 0.1, math.radians(3.3), math.radians(0.5)
-    evaluate, _ = evaluator(planar(
+@pytest.mark.parametrize("theta0, centre_deg", [(0.0, 3.3), (-4.0, 3.3), (-4.0, 2.7)])
+def test_a_dip_of_the_couple_between_march_points_is_found(theta0, centre_deg):
+    """F'_x = 0.5 − 0.45 exp(−((θ − θ_d)/0.5°)²), μ = 0.1: never reverses, and the only stable
+    orientations, |θ − θ_d| <= 0.172°, lie between two march points: after the local minimum of
+    the samples (θ_d = 3.3°) or before it (2.7°: the particle never reaches the 3° sample).
+    From θ₀ = −4° the dip is met after a longer march."""
+    mu, centre, width = 0.1, math.radians(centre_deg), math.radians(0.5)
+    evaluate, calls = evaluator(planar(
         lambda t: 0.5 - 0.45 * math.exp(-(((t - centre) / width) ** 2))))
-    turn = find_stable_orientation(start(evaluate, about_y(0.0)), evaluate, mu, STEP, TOL)
+    turn = find_stable_orientation(start(evaluate, about_y(theta0)), evaluate, mu, STEP, TOL)
+    assert turn.evaluations == len(calls)
     edge = centre - width * math.sqrt(math.log(0.45 / 0.4))
     assert edge <= theta_of(turn.final.rotation) <= edge + TOL
     assert turn.final.demand <= mu
@@ -123,10 +129,72 @@ def test_the_turn_axis_follows_a_couple_that_is_not_along_the_tilt():
 
 
 def test_a_couple_that_never_weakens_is_refused():
+    """A full turn of 1° legs (360 of them, plus the start) without a stable orientation."""
     evaluate, calls = evaluator(lambda r: (0.5, 0.0))
     with pytest.raises(TurningError, match="no stable orientation within 360°"):
         find_stable_orientation(start(evaluate, about_y(0.0)), evaluate, 0.3, STEP, TOL)
-    assert len(calls) <= 400
+    assert len(calls) == 361
+
+
+def test_a_couple_exactly_at_the_friction_limit_sticks():
+    """|F'| = μ F_N counts as stick (the particle turns only if the demand exceeds μ, eq 10):
+    F'_x = 0.3 + 5 (θ₁ − θ) below θ₁ = 2.5° and exactly 0.3 from there on."""
+    mu, theta1 = 0.3, math.radians(2.5)
+    evaluate, _ = evaluator(planar(lambda t: mu + 5.0 * max(theta1 - t, 0.0)))
+    turn = find_stable_orientation(start(evaluate, about_y(0.0)), evaluate, mu, STEP, TOL)
+    assert theta1 <= theta_of(turn.final.rotation) <= theta1 + TOL
+    assert turn.final.demand == mu
+
+
+def test_a_stable_band_narrower_than_the_bisection_tolerance_is_its_zero():
+    """F'_x = −15 (θ − 0.123°) with μ = 1e-5: stable only within 4e-5° of 0.123°, far less
+    than the 0.01° bisection tolerance; the bisection ends on a reversed, unstable orientation
+    and the zero of the couple (found by the Illinois method) is stable: it sticks there, no
+    balance."""
+    mu, k, zero = 1e-5, 15.0, math.radians(0.123)
+    evaluate, _ = evaluator(planar(lambda t: -k * (t - zero)))
+    turn = find_stable_orientation(start(evaluate, about_y(7.5)), evaluate, mu, STEP, TOL)
+    assert abs(theta_of(turn.final.rotation) - zero) <= mu / k
+    assert turn.final.demand <= mu and not turn.balanced
+
+
+def test_without_friction_a_twisted_couple_is_followed_to_its_balance():
+    """μ = 0 and F' = −R_z(30°)·(tilt direction)·sin(tilt): the couple along each leg vanishes
+    where the part across it does not, so the search turns on about new axes from each zero
+    until the couple vanishes altogether, upright."""
+    twist = Rotation.from_rotvec([0.0, 0.0, math.radians(30.0)])
+    evaluate, _ = evaluator(lambda r: -twist.apply(r.apply([0.0, 0.0, 1.0]) * [1, 1, 0])[:2],
+                            force=3.0)
+    turn = find_stable_orientation(start(evaluate, Rotation.from_rotvec([0.3, 0.6, 0.0])),
+                                   evaluate, 0.0, STEP, TOL)
+    # balanced to what the last bracket resolves: within the bisection tolerance of upright
+    assert tilt_of(turn.final.rotation) < TOL and turn.balanced
+    for a, b in zip(turn.path, turn.path[1:], strict=False):
+        step = (b.rotation * a.rotation.inv()).as_rotvec()
+        assert abs(step[2]) < 1e-12
+
+
+def test_a_near_miss_dip_is_searched_and_the_march_goes_on():
+    """A dip down to 0.12 (μ = 0.1) between march points is suspected and searched, holds no
+    stable orientation, and the particle turns on to where the couple falls below μ for good
+    (θ > 10°)."""
+    mu, centre, width = 0.1, math.radians(3.3), math.radians(0.5)
+    evaluate, _ = evaluator(planar(
+        lambda t: 0.5 - 0.38 * math.exp(-(((t - centre) / width) ** 2))
+        - 0.45 * (t > math.radians(10.0))))
+    turn = find_stable_orientation(start(evaluate, about_y(0.0)), evaluate, mu, STEP, TOL)
+    assert math.radians(10.0) <= theta_of(turn.final.rotation) <= math.radians(10.0) + TOL
+    thetas = [theta_of(e.rotation) for e in turn.path]
+    assert thetas == sorted(thetas) and len(thetas) >= 10
+
+
+def test_the_couple_along_a_turn_is_scaled_by_the_normal_force():
+    """drive = F'·(unit F' of the reference)/F_N (dimensionless)."""
+    ref = Evaluation(about_y(0.0), 2.0, 1.0, None, None, np.array([3.0, 4.0]))
+    other = Evaluation(about_y(0.0), 4.0, 1.0, None, None, np.array([1.0, 2.0]))
+    assert other.drive(ref) == pytest.approx((0.6 * 1.0 + 0.8 * 2.0) / 4.0, rel=1e-15)
+    np.testing.assert_allclose(ref.axis, [-0.8, 0.6])
+    assert ref.demand == pytest.approx(2.5)
 
 
 def node(theta_deg, top, bottom):

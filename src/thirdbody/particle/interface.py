@@ -58,12 +58,6 @@ class Window:
         return (slice(self.j0 + n, self.j0 + n + self.ny),
                 slice(self.i0 + n, self.i0 + n + self.nx))
 
-    def union(self, other: Window) -> Window:
-        i0, j0 = min(self.i0, other.i0), min(self.j0, other.j0)
-        i1 = max(self.i0 + self.nx, other.i0 + other.nx)
-        j1 = max(self.j0 + self.ny, other.j0 + other.ny)
-        return Window(i0, j0, i1 - i0, j1 - j0)
-
 
 def remap(field: np.ndarray, source: Window, target: Window) -> np.ndarray:
     """Copy a field (..., ny, nx) from one lattice window to another; zero where not covered."""

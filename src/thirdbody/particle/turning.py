@@ -153,11 +153,12 @@ class _Search:
                 break
         return best_t, best
 
-    def dip(self, prev: Evaluation, t_prev: float, a: Evaluation, t_a: float,
-            b: Evaluation) -> tuple[Evaluation, float, Evaluation] | None:
-        """Golden-section search of the demand over the two legs prev -> a (length t_prev) and
-        a -> b (length t_a) for a stable orientation; returns (origin of its leg, its position
-        on that leg, the stable orientation) or None."""
+    def dip(self, prev: Evaluation, a: Evaluation,
+            step: float) -> tuple[Evaluation, float, Evaluation] | None:
+        """Golden-section search of the demand over the two march legs prev -> a and a -> (the
+        next march point), each ``step`` long, for a stable orientation; returns (origin of its
+        leg, its position on that leg, the stable orientation) or None."""
+        t_prev = step
 
         def point(s: float) -> tuple[Evaluation, float]:
             return (prev, s) if s < t_prev else (a, s - t_prev)
@@ -166,7 +167,7 @@ class _Search:
             origin, t = point(s)
             return self.at(origin, t) if t > 0 else origin
 
-        lo, hi = 0.0, t_prev + t_a
+        lo, hi = 0.0, 2.0 * step
         x1, x2 = lo + _GOLDEN * (hi - lo), hi - _GOLDEN * (hi - lo)
         e1, e2 = value(x1), value(x2)
         while hi - lo > self.tol:
@@ -206,12 +207,11 @@ def find_stable_orientation(start: Evaluation, evaluate: Callable[..., Evaluatio
     search = _Search(evaluate, mu_min, tol)
     search.count = 1
     path: list[Evaluation] = [start]
-    # lengths of the latest march legs: path[-k-1] -> path[-k] is a full leg of legs[-k]
-    legs: list[float] = []
+    marched = False                     # path[-2] -> path[-1] is a full march leg
     a = start
     travelled = 0.0
     while True:
-        if travelled >= max_turn:
+        if travelled >= max_turn * (1.0 - 1e-12):      # rounding of the summed legs
             raise TurningError(
                 f"no stable orientation within {math.degrees(max_turn):.0f}° of turning: the "
                 f"couple stays above the friction limit (|F'|/F_N = {a.demand:.4g} > "
@@ -220,15 +220,12 @@ def find_stable_orientation(start: Evaluation, evaluate: Callable[..., Evaluatio
         travelled += step
         origin, t_end, end = a, step, b
         if not search.stops(b, a):
-            if not (legs and _dip_suspected(path[-2], a, b, mu_min)):
-                path.append(b)
-                legs.append(step)
-                a = b
-                continue
-            found = search.dip(path[-2], legs[-1], a, step, b)
+            found = None
+            if marched and _dip_suspected(path[-2], a, b, mu_min):
+                found = search.dip(path[-2], a, step)
             if found is None:
                 path.append(b)
-                legs.append(step)
+                marched = True
                 a = b
                 continue
             origin, t_end, end = found
@@ -239,7 +236,7 @@ def find_stable_orientation(start: Evaluation, evaluate: Callable[..., Evaluatio
         if final is not None:
             return Turn(final, tuple(path), search.count, balanced)
         a = path[-1]                # turned back at an unstable balance: on about a new axis
-        legs = []
+        marched = False
 
 
 def _dip_suspected(prev: Evaluation, a: Evaluation, b: Evaluation, mu_min: float) -> bool:
