@@ -229,6 +229,10 @@ def test_paper_fig4_smaller_friction_turns_further_then_sticks():
         assert sim.status == "complete"
         assert ds.turned.values.tolist() == [1, 0, 0, 0]
         assert (ds.ratio.values[1:] < 1).all()
+        # symmetric about the xz-plane and turned about y: the 3-D turn stays about y
+        assert np.abs(ds.rotation.sel(component="x")).max() < 1e-12      # degrees
+        assert np.abs(ds.tangential_force.sel(component="y")).max() < 1e-8 * float(
+            np.abs(ds.tangential_force).max())
         turns[mu] = float(ds.rotation.sel(component="y")[0])
     assert 5.5 < turns[0.3] < 7.0 and 8.0 < turns[0.2] < 9.5
 
@@ -298,7 +302,17 @@ def test_without_friction_the_ellipsoid_turns_flat():
     assert abs(float(ds.orientation.sel(component="y")[0])) < 1e-4
     assert int(ds.balanced[0]) == 1
     assert np.abs(ds.tangential_force.values).max() < 1e-6 * float(ds.normal_force[0])
-    assert not ds.traction.values.any()
+    assert not ds.traction.values.any() and not ds.twist_ratio.values.any()
+    # the couple left at the balance is what the moment residual reports: with no traction it
+    # is the normal couple alone, |r̄_up − r̄_low| / h from the maps
+    X, Y = np.meshgrid(ds.map_x.values, ds.map_y.values)
+    for k in range(ds.sizes["step"]):
+        centroids = []
+        for side in ("upper", "lower"):
+            p = ds.pressure.isel(map_step=k).sel(interface=side).values
+            centroids.append(np.array([(p * X).sum(), (p * Y).sum()]) / p.sum())
+        offset = np.hypot(*(centroids[0] - centroids[1])) / float(ds.plate_gap[k])
+        assert float(ds.moment_residual[k]) == pytest.approx(offset, rel=1e-6, abs=1e-15)
 
 
 def test_an_upright_sphere_between_frictionless_plates_runs():
@@ -382,6 +396,9 @@ def test_force_and_moment_balance_from_the_stored_maps():
             twist += float((X * tau[1] - Y * tau[0]).sum() * dA)
         radius = math.sqrt(float(ds.contact_area.isel(step=k).max()) / math.pi)
         assert abs(twist) <= 1e-3 * 0.25 * F * radius
+        assert float(ds.twist_moment[k]) == pytest.approx(twist, rel=1e-6, abs=1e-12 * F * h)
+        assert float(ds.twist_ratio[k]) == pytest.approx(abs(twist) / (0.25 * F * radius),
+                                                          rel=1e-6, abs=1e-12)
     # without the twist balance the tractions do twist: it is needed in this case
     unbalanced = tb.Simulation(tb.Particle(shape, tb.Material(1e9, 0.3), -41.0,
                                            tilt_axis_deg=60.0), tb.Plates(0.25),
@@ -522,9 +539,99 @@ def test_a_run_resumed_from_a_snapshot_ends_as_an_uninterrupted_one():
     _, next_step = make().restore(blobs[1])
     assert next_step == 2
     ds = make().run(resume_from=blobs[1])
+    assert ds.map_step.values.tolist() == [0, 2, 3]          # every 2nd step and the last
     timing = [v for v in ds.data_vars if v.startswith("time_")]
     assert ds.drop_vars(timing).identical(straight.drop_vars(timing))
     other = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), tb.Material(1e9, 0.3), 21.0),
                           tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=4), resolution=60)
     with pytest.raises(ValueError, match="different inputs"):
         other.restore(blobs[1])
+
+
+def test_the_recorded_orientation_is_the_tilt_it_was_given():
+    """A sticking steel ellipsoid tilted 20° about the axis at azimuth 30° after a 50° yaw:
+    tilt, azimuth, yaw, the tilt vector 20°·(cos 30°, sin 30°) and the quaternion of
+    R = R_axis(20°) R_z(50°), built here with scipy; the prescribed force is the load value."""
+    from scipy.spatial.transform import Rotation
+
+    _, ds = run(20.0, mu=0.9, load=tb.ForceTable([0.5]), maps_every=0, tilt_axis=30.0,
+                yaw=50.0)
+    assert int(ds.state[0]) == 0
+    assert float(ds.tilt[0]) == pytest.approx(20.0, abs=1e-9)
+    assert float(ds.tilt_azimuth[0]) == pytest.approx(30.0, abs=1e-9)
+    assert float(ds.yaw[0]) == pytest.approx(50.0, abs=1e-9)
+    np.testing.assert_allclose(ds.orientation.values[0], 20.0 * np.array(
+        [math.cos(math.radians(30.0)), math.sin(math.radians(30.0))]), atol=1e-9)
+    axis = np.array([math.cos(math.radians(30.0)), math.sin(math.radians(30.0)), 0.0])
+    expected = (Rotation.from_rotvec(math.radians(20.0) * axis)
+                * Rotation.from_rotvec([0.0, 0.0, math.radians(50.0)])).as_quat()
+    q = ds.quaternion.values[0]
+    assert min(np.abs(q - expected).max(), np.abs(q + expected).max()) < 1e-12
+    assert float(ds.load_value[0]) == float(ds.normal_force[0]) == 0.5
+
+
+def test_a_particle_given_as_a_quaternion():
+    """The orientation can be a unit quaternion (x, y, z, w), normalised on input, instead of
+    the tilt; both at once, or a malformed quaternion, are refused naming the field."""
+    from scipy.spatial.transform import Rotation
+
+    shape, mat = Ellipsoid((A, B, C)), tb.Material(1e9, 0.3)
+    q = Rotation.from_rotvec([0.1, 0.3, -0.2]).as_quat()
+    particle = tb.Particle(shape, mat, quaternion=tuple(2.0 * q))
+    np.testing.assert_allclose(particle.orientation.as_quat(), q, atol=1e-15)
+    assert particle.quaternion == pytest.approx(tuple(q))
+    for bad in ([0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, math.nan, 1.0]):
+        with pytest.raises(ValueError, match=r"particle\.quaternion must be four finite"):
+            tb.Particle(shape, mat, quaternion=bad)
+    for tilt in ({"orientation_deg": 1.0}, {"tilt_axis_deg": 91.0}, {"yaw_deg": 1.0}):
+        with pytest.raises(ValueError, match=r"either a tilt .* or a quaternion"):
+            tb.Particle(shape, mat, quaternion=tuple(q), **tilt)
+    with pytest.raises(ValueError, match=r"particle.yaw_deg \(degrees\)"):
+        tb.Particle(shape, mat, yaw_deg=math.inf)
+
+
+def test_simulation_defaults_are_the_documented_ones():
+    """The Python defaults equal the configuration's (and so the README's), the resolution
+    is cells per particle size, and zero tolerances where allowed are allowed."""
+    import inspect
+
+    from thirdbody.io.config import Numerics
+
+    documented = Numerics()
+    parameters = inspect.signature(tb.Simulation).parameters
+    for name in ("resolution", "tol", "angle_step_deg", "angle_tol_deg", "maps_every",
+                 "classification", "twist_tol"):
+        assert parameters[name].default == getattr(documented, name), name
+    particle = tb.Particle(Ellipsoid((A, B, C)), STEEL)
+    sim = tb.Simulation(particle, tb.Plates(0.3), tb.ForceTable([1.0]), resolution=100)
+    assert sim.cell_size == pytest.approx(A / 100) and sim.resolution == pytest.approx(100)
+    sim = tb.Simulation(particle, tb.Plates(0.3), tb.ForceTable([1.0]), cell_size=2e-5)
+    assert sim.resolution == pytest.approx(A / 2e-5)
+    assert tb.Simulation(particle, tb.Plates(0.3), tb.ForceTable([1.0]),
+                         twist_tol=0.0).twist_tol == 0.0
+    with pytest.raises(ValueError, match="twist_tol"):
+        tb.Simulation(particle, tb.Plates(0.3), tb.ForceTable([1.0]), twist_tol=-1.0)
+    with pytest.raises(ValueError, match="maps_every"):
+        tb.Simulation(particle, tb.Plates(0.3), tb.ForceTable([1.0]), maps_every=-1)
+
+
+def test_sticking_under_a_proportional_load_keeps_its_traction_history():
+    """A steel ellipsoid that sticks while the load rises in 12 steps: F' grows with F_N at a
+    nearly fixed ratio (proportional loading), so with its history each step adds a traction
+    increment that sticks everywhere but at the rim (FORMULAS.md: no slip under proportional
+    loading), while a one-shot solve of the last step slips over most of the contact
+    (Cattaneo: c/a = (1 − Q/μP)^(1/3))."""
+    from thirdbody.orientation import about_y
+    from thirdbody.particle import PairStatics
+
+    _, ds = run(20.0, mu=0.6, load=tb.LinearRamp(stop=1.0, steps=12), maps_every=0)
+    assert not ds.turned.values.any()
+    ratio = float(ds.ratio.sel(interface="lower")[-1])
+    stick = float(ds.stick_area.sel(interface="lower")[-1])
+    area = float(ds.contact_area.sel(interface="lower")[-1])
+    assert stick > 0.8 * area
+    statics = PairStatics(Ellipsoid((A, B, C)), STEEL, A / 100, 1e-8)
+    ev = statics.at_force(about_y(math.radians(20.0)), 1.0)
+    one_shot = tb.solve_tangential(ev.low.contact, 0.6, force=ev.demand_force)
+    assert one_shot.stick_area < 0.5 * area
+    assert one_shot.stick_area / area == pytest.approx((1 - ratio) ** (2 / 3), abs=0.15)

@@ -174,7 +174,7 @@ def test_an_approach_beyond_the_first_bound_widens_the_problem(monkeypatch):
     the main bowl, and the second bowl (20 µm higher, beyond a ridge) touches at the approach
     found (about 40 µm). The solve notices that its approach exceeds the bound and repeats
     with a wider one: both bowls carry load, as in the whole-footprint solve."""
-    monkeypatch.setattr(Interface, "_bound", lambda self, surfaces, force, approach: 1e-8)
+    monkeypatch.setattr(Interface, "_bound", lambda self, surfaces, force: 1e-8)
     shape = TwoDips(0.5e-3, (3e-4, 1e-4), 1e-4, 2e-5, 1e-3)
     ev = compare(shape, Rotation.identity(), 1e-5, 10.0)
     assert ev.low.spots == 2
@@ -195,3 +195,37 @@ def test_remap_moves_fields_between_lattice_windows():
     assert not remap(field, source, Window(7, -2, 2, 2)).any()      # side by side: no overlap
     assert not remap(field, source, Window(3, 1, 4, 2)).any()
     np.testing.assert_array_equal(remap(field, source, source), field)
+
+
+def test_spots_are_connected_through_edges_and_corners():
+    from thirdbody.particle import count_spots
+
+    contact = np.zeros((6, 7), dtype=bool)
+    contact[1, 1] = contact[2, 2] = True            # touching at a corner: one spot
+    contact[4, 4:6] = True                           # a second one
+    contact[1, 5] = True                             # a third, alone
+    assert count_spots(contact) == 3
+    assert count_spots(np.zeros((3, 3), dtype=bool)) == 0
+
+
+def test_the_curvature_allowance_of_a_quadratic_surface():
+    """g = a x² + b y² + c x y on unit samples: the second differences are 2a (x), 2b (y),
+    2(a + b ± c) (diagonals); the allowance is half the largest, a + b + |c|, inside, and
+    leaves out the neighbours that miss the body (inf) or lie beyond the scan."""
+    from thirdbody.particle.surface import _allowance
+
+    a, b, c = 1.0, 3.0, 0.5
+    x, y = np.meshgrid(np.arange(-3.0, 4.0), np.arange(-3.0, 4.0))
+    g = a * x**2 + b * y**2 + c * x * y
+    out = _allowance(g)
+    np.testing.assert_allclose(out[1:-1, 1:-1], a + b + abs(c), rtol=1e-12)
+    # on the border only the stencils inside the scan count: along the edge row, x only
+    np.testing.assert_allclose(out[0, 1:-1], a, rtol=1e-12)
+    np.testing.assert_allclose(out[1:-1, 0], b, rtol=1e-12)
+    saddle = 3.0 * x**2 - y**2                       # axis x gives 3, the diagonals 2
+    assert _allowance(saddle)[3, 2] == pytest.approx(3.0)
+    saddle[3, 3] = np.inf                            # a ray that misses: no allowance there,
+    out = _allowance(saddle)                         # nor through it for its neighbours
+    assert out[3, 3] == 0.0 and out[3, 2] == pytest.approx(2.0)
+    concave = _allowance(-(x**2))                    # a crest dips nowhere: no allowance
+    assert not concave.any()

@@ -8,10 +8,13 @@ Public API::
     solve_tangential(normal, mu, force=... | shift=..., previous=...) -> TangentialContact
     reference.hertz, reference.mindlin  analytic solutions to check runs against
     citations()                         the papers behind the methods used
-    Particle(shape, material, orientation_deg), Plates(mu_up, mu_low)
+    Particle(shape, material, orientation_deg, tilt_axis_deg, yaw_deg | quaternion=...)
+    orientation.tilt, orientation.decompose   3-D orientations (scipy Rotation)
+    Plates(mu_up, mu_low)
     Simulation(particle, plates, LinearRamp(stop=F, steps=n)).run() -> xarray.Dataset
 """
 
+from . import orientation
 from ._citations import citations
 from ._version import __version__
 from .bem import (
@@ -48,6 +51,7 @@ __all__ = [
     "TangentialContact",
     "__version__",
     "citations",
+    "orientation",
     "set_workers",
     "solve_normal",
     "solve_tangential",

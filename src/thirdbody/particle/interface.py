@@ -133,11 +133,10 @@ class Interface:
         self.spacing, self.tol = float(spacing), tol
         self.last: InterfaceNormal | None = None
 
-    def _bound(self, surfaces: Surfaces, force: float | None, approach: float | None) -> float:
-        """A first bound (m) on the approach, from the last solve or a Hertz estimate."""
+    def _bound(self, surfaces: Surfaces, force: float) -> float:
+        """A first bound (m) on the approach, from the last solve or a Hertz estimate. Only
+        the cost depends on it: an approach beyond it widens the problem (module docstring)."""
         floor = 2.0 * surfaces.floor_allowance(self.index) + 2.0 * self.spacing * 1e-6
-        if approach is not None:
-            return max(1.05 * approach, floor)
         if self.last is not None and self.last.contact.force > 0:
             # the approach grows like F^(2/3)
             ratio = force / self.last.contact.force
@@ -148,14 +147,13 @@ class Interface:
         hertz = (9 * force**2 / (16 * self.material.E_star**2 * radius)) ** (1 / 3)
         return max(2.0 * hertz, floor)
 
-    def solve_normal(self, surfaces: Surfaces, *, force: float | None = None,
-                     approach: float | None = None) -> InterfaceNormal:
-        """Frictionless normal contact at the orientation of ``surfaces`` under ``force`` (N)
-        or ``approach`` (m, from the reference); warm-started from the last solve at the same
-        orientation. Every spot the plate can reach is in the problem (module docstring)."""
+    def solve_normal(self, surfaces: Surfaces, *, force: float) -> InterfaceNormal:
+        """Frictionless normal contact at the orientation of ``surfaces`` under ``force`` (N);
+        warm-started from the last solve at the same orientation. Every spot the plate can
+        reach is in the problem (module docstring)."""
         n = surfaces.n
         orientation = key(surfaces.rotation)
-        bound = self._bound(surfaces, force, approach)
+        bound = self._bound(surfaces, force)
         extra = np.zeros((surfaces.cells, surfaces.cells), dtype=bool)
         warm = None
         if self.last is not None and self.last.orientation == orientation:
@@ -172,8 +170,8 @@ class Interface:
                 if not initial.any():
                     initial = None
             try:
-                normal = solve_normal(gap, grid, self.material, force=force,
-                                      approach=approach, tol=self.tol, initial=initial)
+                normal = solve_normal(gap, grid, self.material, force=force, tol=self.tol,
+                                      initial=initial)
             except ContactAtEdgeError:
                 # the window holds the whole footprint with free cells around it: only a
                 # contact over the whole particle (an approach beyond its size) gets there
