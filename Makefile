@@ -1,16 +1,18 @@
 # Quick start:  `make demo`  (sets up .venv, runs the paper's Fig. 3 particle simulation, plots in out/fig3)
 #               `make test`  (sets up .venv, runs ruff and the whole test suite)
 # More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
+#               `make layer` (30 potatoes between the plates), `make layer-hertz`,
 #               `make sweep` (a 20-case sweep on a local dask cluster),
 #               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`,
+#               `make bench-layer`,
 #               `make mutation` (mutmut over the particle physics)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo hertz fig2 fig3 fig4 fig5 sweep test test-fast lint bench bench-tangential \
-	bench-simulation bench-sweep mutation clean venv
+.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz sweep test test-fast lint bench \
+	bench-tangential bench-simulation bench-sweep bench-layer mutation clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -44,6 +46,13 @@ fig3 fig4 fig5: $(VENV)/.installed-test
 fig2: $(VENV)/.installed-test
 	$(BIN)/python examples/fig2_partial_slip.py --out $(OUT)/fig2
 
+layer: $(VENV)/.installed-test
+	$(BIN)/thirdbody run src/thirdbody/examples/layer_polydisperse.toml -o $(OUT)/layer
+	$(BIN)/thirdbody export-vtk $(OUT)/layer/results.nc $(OUT)/layer/vtk
+
+layer-hertz: $(VENV)/.installed-test
+	$(BIN)/python examples/layer_hertz_check.py --out $(OUT)/layer_hertz
+
 sweep: $(VENV)/.installed-test
 	$(BIN)/thirdbody sweep src/thirdbody/examples/sweep_fig4.toml -o $(OUT)/sweep_fig4
 
@@ -66,7 +75,14 @@ bench-tangential: $(VENV)/.installed-bench
 bench-simulation: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/simulation_fig3.py
 
-bench-sweep: $(VENV)/.installed-test
+bench-layer: $(VENV)/.installed-test
+	$(BIN)/thirdbody run src/thirdbody/examples/layer_polydisperse.toml -o $(OUT)/layer
+	$(BIN)/thirdbody export-vtk $(OUT)/layer/results.nc $(OUT)/layer/vtk
+
+layer-hertz: $(VENV)/.installed-test
+	$(BIN)/python examples/layer_hertz_check.py --out $(OUT)/layer_hertz
+
+sweep: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/sweep_throughput.py --md benchmarks/results/sweep_throughput.md
 
 # mutation testing of the particle physics ([tool.mutmut] in pyproject.toml); hours on 2 cores

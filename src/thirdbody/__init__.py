@@ -12,6 +12,8 @@ Public API::
     orientation.tilt, orientation.decompose   3-D orientations (scipy Rotation)
     Plates(mu_up, mu_low)
     Simulation(particle, plates, LinearRamp(stop=F, steps=n)).run() -> xarray.Dataset
+    Layer([PlacedParticle(particle, (x, y)), ...]), Layer.random(...)   many particles
+    Simulation(layer, plates, load).run()  -> xarray.Dataset along (step, particle)
 """
 
 from . import orientation
@@ -28,6 +30,7 @@ from .bem import (
     solve_normal,
     solve_tangential,
 )
+from .layer import Layer, LayerError, PlacedParticle
 from .loading import ForceTable, GapRamp, HoldThenRamp, LinearRamp
 from .material import Material
 from .particle import Particle, Plates
@@ -41,10 +44,13 @@ __all__ = [
     "GapRamp",
     "Grid",
     "HoldThenRamp",
+    "Layer",
+    "LayerError",
     "LinearRamp",
     "Material",
     "NormalContact",
     "Particle",
+    "PlacedParticle",
     "Plates",
     "Simulation",
     "SimulationError",

@@ -1,6 +1,6 @@
 """Checkpoints of a simulation: what a run needs to continue after its last completed step.
 
-A snapshot holds the inputs (to refuse resuming a different run), the particle state, the
+A snapshot holds the inputs (to refuse resuming a different run), the particles' states, the
 records and maps so far, and each interface's last normal solve (the next step's warm start),
 so that a resumed run ends exactly as an uninterrupted one. It is a Python pickle: only load
 snapshots you made yourself.
@@ -12,20 +12,21 @@ import pickle
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from .simulation import ParticleState, Simulation
+    from .simulation import LayerState, Simulation
 
 __all__ = ["restore", "snapshot"]
 
 
-def snapshot(sim: Simulation, state: ParticleState) -> bytes:
+def snapshot(sim: Simulation, state: LayerState) -> bytes:
     """Pickle everything needed to continue ``sim`` after its last completed step."""
     return pickle.dumps({
         "inputs": sim.inputs(), "state": state, "records": sim.records, "maps": sim.maps,
-        "interfaces": {k: i.last for k, i in sim.interfaces.items()},
+        "interfaces": [{k: i.last for k, i in m.interfaces.items()} for m in sim.members],
+        "points": [(m.points, m._points_key) for m in sim.members],
     })
 
 
-def restore(sim: Simulation, blob: bytes) -> tuple[ParticleState, int]:
+def restore(sim: Simulation, blob: bytes) -> tuple[LayerState, int]:
     """Load a :func:`snapshot` into ``sim``; returns (state, index of the next step).
 
     Raises ValueError if the snapshot was made with different inputs.
@@ -34,6 +35,9 @@ def restore(sim: Simulation, blob: bytes) -> tuple[ParticleState, int]:
     if data["inputs"] != sim.inputs():
         raise ValueError("cannot resume: the results were made with different inputs")
     sim.records, sim.maps = list(data["records"]), list(data["maps"])
-    for k, last in data["interfaces"].items():
-        sim.interfaces[k].last = last
+    for m, lasts, (points, points_key) in zip(sim.members, data["interfaces"], data["points"],
+                                              strict=True):
+        for k, last in lasts.items():
+            m.interfaces[k].last = last
+        m.points, m._points_key = points, points_key
     return data["state"], len(sim.records)

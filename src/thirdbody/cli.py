@@ -1,4 +1,4 @@
-"""The ``thirdbody`` command line: run, sweep, plot, examples, validate.
+"""The ``thirdbody`` command line: run, sweep, plot, export-vtk, examples, validate.
 
 Exit codes: 0 success; 1 a run that stopped on a failed step, or a validation check out of
 tolerance; 2 bad input (configuration, file, option); 130 interrupted (resume with --resume).
@@ -60,8 +60,8 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
     if print_config:
         typer.echo(cfg.to_toml())
         return
-    particle, plates, load, numerics = cfg.build()
-    sim = Simulation(particle, plates, load, **numerics)
+    body, plates, load, numerics = cfg.build()
+    sim = Simulation(body, plates, load, **numerics)
     results = out / "results.nc"
     if results.exists() and not resume:
         _fail(f"{results} exists: use --resume to continue it, or another --out")
@@ -84,9 +84,14 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         task = bar.add_task("starting", total=n)
 
         def progress(r) -> None:
-            bar.update(task, completed=r.step + 1, description=(
-                f"step {r.step}: F_N {r.normal_force:.4g} N, {r.state}, "
-                f"{orientation_label(r)}, F_T/μF_N {r.ratio[1]:.3f}"))
+            if sim.single:
+                text = (f"step {r.step}: F_N {r.normal_force:.4g} N, {r.state}, "
+                        f"{orientation_label(r)}, F_T/μF_N {r.ratio[1]:.3f}")
+            else:
+                text = (f"step {r.step}: F_N {r.total_force:.4g} N, {r.loaded} loaded: "
+                        f"{r.fraction_stick:.0%} stick, {r.fraction_roll:.0%} roll, "
+                        f"{r.fraction_rotate:.0%} rotate")
+            bar.update(task, completed=r.step + 1, description=text)
 
         try:
             with warnings.catch_warnings():
@@ -211,6 +216,19 @@ def plot(results: Annotated[Path, typer.Argument(
         written = save_all(ds, out or results.parent)
     for path in written:
         typer.echo(str(path))
+
+
+@app.command("export-vtk")
+def export_vtk(results: Annotated[Path, typer.Argument(help="a results.nc file")],
+               out: Annotated[Path, typer.Argument(help="directory for the .vtu/.pvd files")],
+               ) -> None:
+    """Write each particle's surface at its pose with pressure, traction and stick/slip status
+    on it, one .vtu file per load step plus a .pvd time series (ParaView)."""
+    from .io.vtk import export_vtk_cli
+
+    code = export_vtk_cli(results, out)
+    if code:
+        raise typer.Exit(code)
 
 
 @examples_app.callback()

@@ -1,7 +1,8 @@
 """Figures from a results dataset (matplotlib, Agg): the state curve, the orientation and
-position history, and contact maps. Every function takes the :class:`xarray.Dataset` written by
-:meth:`thirdbody.Simulation.run` and returns the figure; :func:`save_all` writes them as PNG
-(and PDF) files.
+position history, and contact maps; for a layer of particles, a top view of the layer, the load
+shares, the fractions of the states and each particle's F_T/(μF_N). Every function takes the
+:class:`xarray.Dataset` written by :meth:`thirdbody.Simulation.run` and returns the figure;
+:func:`save_all` writes them as PNG (and PDF) files.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["contact_maps", "orientation_history", "save_all", "save_state_map", "state_curve",
+__all__ = ["contact_maps", "layer_top_view", "load_shares", "orientation_history",
+           "particle_ratios", "save_all", "save_state_map", "state_curve", "state_fractions",
            "state_map"]
 
 _STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
@@ -280,9 +282,22 @@ def contact_maps(ds, steps: list[int] | None = None):
 
 def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
              labels: dict[int, str] | None = None, map_steps: list[int] | None = None,
-             ) -> list[Path]:
-    """Write every figure for ``ds`` into ``out`` (created); returns the files written."""
+             layer=None) -> list[Path]:
+    """Write every figure for ``ds`` into ``out`` (created); returns the files written.
+
+    For a layer's results (a ``particle`` dimension) the figures are :func:`layer_top_view`
+    (at ``map_steps`` if given, drawing the true outlines of ``layer``, a
+    :class:`thirdbody.Layer`, or of the layer rebuilt from the run's ``config`` attribute),
+    :func:`load_shares`, :func:`state_fractions` and :func:`particle_ratios`; ``labels`` is not
+    used then."""
     plt = _plt()
+    if "particle" in ds.dims:
+        if layer is None:
+            layer = _layer_from_config(ds)
+        figures = {"layer_top_view": layer_top_view(ds, map_steps, layer),
+                   "load_shares": load_shares(ds), "state_fractions": state_fractions(ds),
+                   "particle_ratios": particle_ratios(ds)}
+        return _save_figures(plt, figures, out, formats)
     figures = {"state": state_curve(ds, labels), "orientation": orientation_history(ds)}
     if "map_step" in ds.dims and ds.sizes["map_step"]:
         figures["contact_maps"] = contact_maps(ds, map_steps)
@@ -324,9 +339,11 @@ def _ticks(ds, name: str | None) -> tuple[range, list[str]]:
 
 def state_map(summary, x: str | None = None, y: str | None = None):
     """The sweep's behaviour map: per case, the behaviour (colour: stick, roll about the upper
-    or lower interface, rotate, failed) with the total rotation (degrees) written in the cell,
-    and the normal force (N) at the first turn. ``x``, ``y``: sweep dimensions (default the
-    first two); further dimensions become rows of panels (at most six)."""
+    or lower interface, rotate, failed) with the total rotation (degrees) written in the cell
+    (for a layer: the behaviour of the first particle to turn, with the final fractions of the
+    loaded particles rolling and rotating), and the normal force (N) at the first turn. ``x``,
+    ``y``: sweep dimensions (default the first two); further dimensions become rows of panels
+    (at most six)."""
     plt = _plt()
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
@@ -354,11 +371,20 @@ def state_map(summary, x: str | None = None, y: str | None = None):
         behaviour = part.behaviour.transpose(*order).values.reshape(-1, part.sizes[x])
         rotation = part.total_rotation.transpose(*order).values.reshape(behaviour.shape)
         force = part.first_turn_force.transpose(*order).values.reshape(behaviour.shape)
+        layer = "final_fraction_roll" in part and not np.isnan(
+            part.final_fraction_roll.values).all()
+        if layer:       # a layer: the final fractions rolling and rotating, not one rotation
+            roll = part.final_fraction_roll.transpose(*order).values.reshape(behaviour.shape)
+            turn = part.final_fraction_rotate.transpose(*order).values.reshape(behaviour.shape)
         ax_b, ax_f = axes[row]
         ax_b.imshow(behaviour, origin="lower", cmap=cmap, vmin=-0.5, vmax=len(meanings) - 0.5,
                     aspect="auto", interpolation="nearest")
         for (i, j), rot in np.ndenumerate(rotation):
-            if rot == rot:
+            if layer and roll[i, j] == roll[i, j]:
+                colour = "black" if meanings[behaviour[i, j]] == "missing" else "white"
+                ax_b.text(j, i, f"{roll[i, j]:.0%} roll\n{turn[i, j]:.0%} rot.", ha="center",
+                          va="center", fontsize=7, color=colour)
+            elif rot == rot:
                 colour = "black" if meanings[behaviour[i, j]] == "missing" else "white"
                 label = f"{rot:+.1f}°" if abs(rot) >= 0.05 else "0°"
                 ax_b.text(j, i, label, ha="center", va="center", fontsize=7,
@@ -373,8 +399,9 @@ def state_map(summary, x: str | None = None, y: str | None = None):
                 dark = f > 0.5 * (force_max or 1.0)
                 ax_f.text(j, i, f"{f:.3g} N", ha="center", va="center", fontsize=7,
                           color="white" if dark else "black")
-        ax_b.set_title("behaviour, total rotation" + (f" ({where})" if where else ""),
-                       fontsize=9)
+        what = ("first turn; final fractions rolling, rotating" if layer
+                else "behaviour, total rotation")
+        ax_b.set_title(what + (f" ({where})" if where else ""), fontsize=9)
         ax_f.set_title("first turn (grey: never turned)" + (f" ({where})" if where else ""),
                        fontsize=9)
         for ax in (ax_b, ax_f):
@@ -395,3 +422,325 @@ def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", 
                    ) -> list[Path]:
     """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``."""
     return _save_figures(_plt(), {"state_map": state_map(summary)}, out, formats)
+
+
+# --- layers ------------------------------------------------------------------------------------
+#: a layer particle's colour by its state in a step (the sweeps' behaviour colours)
+_STATE_COLOURS = {**{k: _BEHAVIOUR_COLOURS[k] for k in ("stick", "roll_upper", "roll_lower",
+                                                         "rotate", "failed")},
+                  "unloaded": "0.75"}
+_DEFAULT_STATES = "stick roll_upper roll_lower rotate failed unloaded"
+_MARKER_AREA = 250.0            # pt²: the centroid marker of the run's largest normal force
+_OUTLINE_RAYS = 40              # rays per side of the grid sampling a mid-plane section
+_CARRIERS = 5                   # particles named in the load-share and ratio figures
+
+
+def _state_names(ds) -> list[str]:
+    """The state names in code order (the ``state`` variable's ``flag_meanings``)."""
+    return str(ds.state.attrs.get("flag_meanings", _DEFAULT_STATES)).split()
+
+
+def _state_colour(name: str) -> str:
+    return _STATE_COLOURS.get(name, _STATE_COLOURS["unloaded"])
+
+
+def _layer_title(ds) -> str:
+    i = _inputs(ds)
+    nan = float("nan")
+    up, low = i.get("mu_up", nan), i.get("mu_low", nan)
+    mu = f"μ = {up:g}" if up == low else f"μ_up = {up:g}, μ_low = {low:g}"
+    status = ds.attrs.get("status", "complete")
+    return (f"layer of {ds.sizes['particle']} particles, {mu}"
+            + ("" if status == "complete" else f" ({status})"))
+
+
+def _layer_from_config(ds):
+    """The :class:`thirdbody.Layer` rebuilt from the run's ``config`` attribute (TOML), or None
+    when there is none, it cannot be built, or it does not match the results."""
+    text = ds.attrs.get("config")
+    if not text:
+        return None
+    try:
+        import tomllib
+
+        import thirdbody
+        from thirdbody.io.config import parse_config
+
+        body = parse_config(tomllib.loads(text)).build()[0]
+        if isinstance(body, thirdbody.Layer) and len(body) == ds.sizes["particle"]:
+            return body
+    except Exception:       # a config this version cannot build: draw circles instead
+        pass
+    return None
+
+
+def _grid(size: float, n: int = _OUTLINE_RAYS) -> np.ndarray:
+    """n ray positions along one side (m): ±size and a margin of two spacings, so that a
+    section (within ``size`` of the centroid) never touches the grid's edge."""
+    return np.linspace(-1.0, 1.0, n) * size * (n - 1) / (n - 5)
+
+
+def _loops(s: np.ndarray, inside: np.ndarray) -> list[np.ndarray]:
+    """Closed loops (k, 2) of the 0.5 contour of a 0/1 mask sampled at ``s`` × ``s``."""
+    import contourpy
+
+    if not inside.any():
+        return []
+    generator = contourpy.contour_generator(s, s, inside.astype(float),
+                                            line_type=contourpy.LineType.Separate)
+    return [np.asarray(line) for line in generator.lines(0.5) if len(line) > 2]
+
+
+def _section(shape, rotation, z: float, n: int = _OUTLINE_RAYS) -> list[np.ndarray]:
+    """The outline (closed loops (k, 2), m, centroid frame) of the section of ``shape`` at
+    ``rotation`` (body to world) by the horizontal plane at height ``z`` (m) above its
+    centroid: the 0.5 contour of where the lowest and highest crossings of a vertical ray lie
+    either side of ``z``, on n × n rays over ±size. Empty when the plane misses the body."""
+    s = _grid(shape.size, n)
+    X, Y = np.meshgrid(s, s)
+    lo, up = shape.surfaces(rotation, X, Y)
+    with np.errstate(invalid="ignore"):
+        inside = (lo <= z) & (z <= up)
+    return _loops(s, inside)
+
+
+def _silhouette(shape, rotation, n: int = _OUTLINE_RAYS) -> list[np.ndarray]:
+    """The outline (m, centroid frame) of ``shape`` seen from above: where vertical rays hit."""
+    s = _grid(shape.size, n)
+    X, Y = np.meshgrid(s, s)
+    lo, _ = shape.surfaces(rotation, X, Y)
+    return _loops(s, np.isfinite(lo))
+
+
+def _circle(radius: float, points: int = 73) -> np.ndarray:
+    t = np.linspace(0.0, 2 * np.pi, points)
+    return radius * np.column_stack([np.cos(t), np.sin(t)])
+
+
+def _round_down(value: float) -> float:
+    """The largest 1, 2 or 5 × 10ᵏ not above ``value`` (> 0)."""
+    power = 10.0 ** np.floor(np.log10(value))
+    return float(max(m * power for m in (1, 2, 5) if m * power <= value * (1 + 1e-12)))
+
+
+def _top_view_steps(ds, steps) -> list[int]:
+    stored = [int(s) for s in ds.step.values]
+    if not stored:
+        raise ValueError("the results have no step to draw")
+    if steps is None:
+        steps = sorted({stored[0], stored[len(stored) // 2], stored[-1]})
+    chosen = [s for s in dict.fromkeys(int(s) for s in steps) if s in stored]
+    if not chosen:
+        raise ValueError(f"none of the steps {list(steps)} is in the results (steps "
+                         f"{stored[0]} to {stored[-1]})")
+    if len(chosen) > 4:
+        chosen = [chosen[round(i)] for i in np.linspace(0, len(chosen) - 1, 4)]
+    return chosen
+
+
+def layer_top_view(ds, steps: list[int] | None = None, layer=None):
+    """A top view of the layer at the chosen steps (default: the first, the middle and the
+    last; at most four panels), axes in mm. Each particle is drawn by its outline at the
+    mid-plane z = h/2 with the colour of its state in the step, and a dot at its centroid
+    whose area is proportional to its normal force (the same scale in every panel).
+
+    The outlines are the true sections when ``layer`` (the :class:`thirdbody.Layer` that was
+    run) is given, sampled on a grid of vertical rays in each particle's orientation of the
+    step; a particle the mid-plane misses is drawn by its outline seen from above (dotted).
+    Without ``layer`` they are circles of radius ``size`` (dashed), as the panel titles say.
+    """
+    plt = _plt()
+    from matplotlib.colors import to_rgba
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch, PathPatch
+    from matplotlib.path import Path as MplPath
+    from scipy.spatial.transform import Rotation
+
+    n = ds.sizes["particle"]
+    if layer is not None and len(layer) != n:
+        raise ValueError(f"the layer has {len(layer)} particles, the results {n}")
+    steps = _top_view_steps(ds, steps)
+    stored = [int(s) for s in ds.step.values]
+    names = _state_names(ds)
+    force = np.nan_to_num(ds.normal_force.transpose("step", "particle").values)
+    fmax = float(force.max(initial=0.0))
+    scale = _MARKER_AREA / fmax if fmax > 0 else 0.0          # pt² per N
+    x0, y0, size = ds.x0.values, ds.y0.values, ds["size"].values
+    position = ds.position.transpose("step", "particle", "component").sel(
+        component=["x", "y"]).values
+    quaternion = ds.quaternion.transpose("step", "particle", "quaternion_component").sel(
+        quaternion_component=["x", "y", "z", "w"]).values
+    height = ds.centroid_height.transpose("step", "particle").values
+    state = ds.state.transpose("step", "particle").values
+    ks = [stored.index(s) for s in steps]
+    cx, cy = x0 + position[ks, :, 0], y0 + position[ks, :, 1]        # (panel, particle), m
+    pad = 0.05 * max(float(np.ptp(cx) + 2 * size.max()), float(np.ptp(cy) + 2 * size.max()))
+    xlim = (float((cx - size).min() - pad) * 1e3, float((cx + size).max() + pad) * 1e3)
+    ylim = (float((cy - size).min() - pad) * 1e3, float((cy + size).max() + pad) * 1e3)
+    width = (xlim[1] - xlim[0]) / (ylim[1] - ylim[0])
+    side = min(4.2, 14.0 / len(steps) / max(width, 1.0))
+    fig, axes = plt.subplots(1, len(steps), figsize=(side * width * len(steps) + 0.6,
+                                                     side + 1.6),
+                             squeeze=False, constrained_layout=True)
+    outline = "circles of radius `size` (shapes not given)" if layer is None \
+        else "mid-plane sections"
+    present, silhouettes = set(), False
+    for panel, (ax, step, k) in enumerate(zip(axes[0], steps, ks, strict=True)):
+        gap = float(ds.plate_gap.values[k])
+        colours = [_state_colour(names[code]) for code in state[k]]
+        present.update(int(code) for code in state[k])
+        for i in range(n):
+            style = "--"
+            if layer is None:
+                loops = [_circle(float(size[i]))]
+            else:
+                shape = layer[i].particle.shape
+                rotation = Rotation.from_quat(quaternion[k, i])
+                loops, style = _section(shape, rotation, gap / 2 - height[k, i]), "-"
+                if not loops:
+                    loops, style, silhouettes = _silhouette(shape, rotation), ":", True
+            centre = np.array([cx[panel, i], cy[panel, i]])
+            path = MplPath.make_compound_path(
+                *[MplPath((loop + centre) * 1e3, closed=True) for loop in loops])
+            ax.add_patch(PathPatch(path, facecolor=to_rgba(colours[i], 0.3),
+                                   edgecolor=colours[i], linestyle=style, lw=1.3,
+                                   gid=f"outline {i}"))
+            dot = float(np.sqrt(scale * force[k, i])) / 2            # the dot's radius, pt
+            ax.annotate(str(i), tuple(centre * 1e3), textcoords="offset points",
+                        xytext=(dot + 2, dot + 2), fontsize=6, color="0.25")
+        ax.scatter(cx[panel] * 1e3, cy[panel] * 1e3, s=scale * force[k], c=colours,
+                   edgecolors="k", linewidths=0.5, zorder=3, gid="normal force")
+        c = float(ds.compression.values[k])
+        ax.set_title(f"step {step}: c = {100 * c:.2f} %, F_N = "
+                     f"{float(ds.total_force.values[k]):.3g} N, "
+                     f"{int(ds.loaded.values[k])} loaded\n{outline}", fontsize=8)
+        ax.set_xlim(*xlim)
+        ax.set_ylim(*ylim)
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel("y (mm)")
+    states = [Patch(facecolor=to_rgba(_state_colour(names[code]), 0.3),
+                    edgecolor=_state_colour(names[code]), label=names[code].replace("_", " "))
+              for code in sorted(present)]
+    if silhouettes:
+        states.append(Line2D([], [], color="0.3", ls=":",
+                             label="seen from above (the mid-plane misses it)"))
+    fig.legend(handles=states, loc="outside lower left", ncols=min(len(states), 4),
+               fontsize=8, title="state in the step", title_fontsize=8)
+    if fmax > 0:
+        keys = sorted({_round_down(fmax), _round_down(fmax / 3), _round_down(fmax / 10)})
+        sizes = [Line2D([], [], ls="", marker="o", markersize=float(np.sqrt(scale * f)),
+                        markerfacecolor="none", markeredgecolor="k", label=f"{f:g} N")
+                 for f in keys]
+        fig.legend(handles=sizes, loc="outside lower right", ncols=len(sizes), fontsize=8,
+                   title="normal force (dot area)", title_fontsize=8, frameon=True)
+    fig.suptitle(f"top view at the mid-plane z = h/2: {_layer_title(ds)}", fontsize=10)
+    return fig
+
+
+def load_shares(ds):
+    """Each particle's share of the total normal force against the load step, stacked: the
+    particles that carried the most (by their largest share) at the bottom, in colour and
+    named; the others in alternating greys."""
+    plt = _plt()
+    steps = ds.step.values
+    share = np.nan_to_num(ds.load_share.transpose("step", "particle").values)
+    n = share.shape[1]
+    largest = share.max(axis=0, initial=0.0)
+    order = np.argsort(-largest, kind="stable")
+    carriers = [int(i) for i in order[:_CARRIERS] if largest[i] > 0]
+    others = [int(i) for i in order if int(i) not in carriers]
+    palette = plt.get_cmap("tab10").colors
+    colours = [palette[j % 10] for j in range(len(carriers))] \
+        + [("0.72", "0.84")[j % 2] for j in range(len(others))]
+    labels = [f"particle {i} (up to {100 * largest[i]:.0f} %)" for i in carriers] \
+        + [f"{len(others)} others" if j == 0 else "_nolegend_" for j in range(len(others))]
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    ax.stackplot(steps, share[:, carriers + others].T, colors=colours, labels=labels,
+                 edgecolor="white", linewidth=0.3)
+    ax.set_xlabel("load step")
+    ax.set_ylabel("share of the total normal force")
+    ax.set_ylim(0, 1.0)
+    ax.set_xlim(float(steps.min(initial=0)), float(steps.max(initial=1)))
+    twin = ax.twinx()
+    twin.plot(steps, ds.total_force.values, color="k", lw=1.2, ls="--")
+    twin.set_ylabel("total normal force F_N (N), dashed")
+    twin.set_ylim(0, None)
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="outside lower center",
+               ncols=3, title=f"{n} particles, bottom up", title_fontsize=7)
+    ax.set_title(_layer_title(ds), fontsize=9)
+    return fig
+
+
+def state_fractions(ds):
+    """The fractions of the loaded particles that stuck, rolled (about either plate) and
+    rotated in each step against the compression ratio (%), with the number of loaded
+    particles on the right-hand axis."""
+    plt = _plt()
+    from matplotlib.ticker import MaxNLocator
+
+    c = 100 * ds.compression.values
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    for name, label, colour, marker in (("fraction_stick", "stick", "stick", "o"),
+                                        ("fraction_roll", "roll", "roll_upper", "s"),
+                                        ("fraction_rotate", "rotate", "rotate", "^")):
+        ax.plot(c, ds[name].values, marker=marker, ms=4, lw=1.3, color=_state_colour(colour),
+                label=label)
+    ax.set_ylim(-0.03, 1.03)
+    ax.set_xlabel("compression (d₀ − h)/d₀ (%)")
+    ax.set_ylabel("fraction of the loaded particles")
+    twin = ax.twinx()
+    twin.step(c, ds.loaded.values, where="mid", color="0.35", lw=1.2, ls="--",
+              label="loaded particles")
+    twin.set_ylim(0, ds.sizes["particle"] + 0.5)
+    twin.yaxis.set_major_locator(MaxNLocator(integer=True))
+    twin.set_ylabel("loaded particles")
+    handles = ax.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
+    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncols=4)
+    ax.set_title(_layer_title(ds), fontsize=9)
+    return fig
+
+
+def particle_ratios(ds):
+    """F_T/(μF_N) at the interface with the smaller μ (1 is where the pair slips) of every
+    particle loaded at some step against the load step, dots coloured by the particle's state; the slip line at 1 and the stick region
+    below it are marked. The particles that came nearest to slipping are named."""
+    plt = _plt()
+    from matplotlib.lines import Line2D
+
+    steps = ds.step.values
+    # the interface with the smaller μ (the larger ratio): 1 is the limit of the pair
+    both = ds.ratio.transpose("step", "particle", "interface").values
+    lower = np.isfinite(both[..., 1]) & ~(both[..., 0] > both[..., 1])
+    ratio = np.where(lower, both[..., 1], both[..., 0])
+    mu = json.loads(ds.attrs.get("inputs", "{}"))
+    which = "μ_min" if mu.get("mu_up") != mu.get("mu_low") else "μ"
+    state = ds.state.transpose("step", "particle").values
+    names = _state_names(ds)
+    loaded = [i for i in range(ratio.shape[1]) if np.isfinite(ratio[:, i]).any()]
+    peak = {i: float(np.nanmax(np.abs(ratio[:, i]))) for i in loaded}
+    named = sorted(loaded, key=lambda i: -peak[i])[:_CARRIERS]
+    top = max(1.2, 1.1 * max(peak.values(), default=0.0))
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    ax.axhspan(0, 1.0, color="0.9", zorder=0)
+    ax.axhline(1.0, color="tab:red", lw=1.5, label="slip: F_T = μF_N", gid="slip line")
+    palette = plt.get_cmap("Dark2").colors          # apart from the state colours
+    for i in loaded:
+        label = f"particle {i}" if i in named else "_nolegend_"
+        colour = palette[named.index(i) % len(palette)] if i in named else "0.6"
+        ax.plot(steps, ratio[:, i], lw=1.0, color=colour, label=label, gid=f"particle {i}")
+        finite = np.isfinite(ratio[:, i])
+        ax.scatter(steps[finite], ratio[finite, i], s=16, zorder=3, edgecolors="k",
+                   linewidths=0.4,
+                   c=[_state_colour(names[code]) for code in state[finite, i]])
+    shown = sorted({int(code) for i in loaded for code in state[np.isfinite(ratio[:, i]), i]})
+    handles = ax.get_legend_handles_labels()[0] + [
+        Line2D([], [], ls="", marker="o", ms=4, color=_state_colour(names[code]),
+               markeredgecolor="k", markeredgewidth=0.4, label=names[code].replace("_", " "))
+        for code in shown]
+    fig.legend(handles=handles, fontsize=7, loc="outside right upper")
+    ax.set_ylim(0, top)
+    ax.set_xlabel("load step")
+    ax.set_ylabel(f"F_T / ({which} F_N)")
+    ax.set_title(f"{_layer_title(ds)}: {len(loaded)} loaded at some step", fontsize=9)
+    return fig

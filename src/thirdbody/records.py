@@ -10,6 +10,7 @@ centres in the particle frame (m), covering every stored contact.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -17,11 +18,12 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["INTERFACES", "MAP_VARIABLES", "STATES", "VARIABLES", "StepMaps", "StepRecord",
-           "Variable", "orientation_label", "to_dataset"]
+__all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES", "LayerRecord",
+           "StepMaps", "StepRecord", "Variable", "layer_dataset", "orientation_label",
+           "to_dataset"]
 
 #: State codes stored in the results (``state`` variable, with ``flag_values``/``flag_meanings``).
-STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed")
+STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
 STATE_CODE = {name: i for i, name in enumerate(STATES)}
 INTERFACES = ("upper", "lower")
 COMPONENTS = ("x", "y")
@@ -73,6 +75,7 @@ VARIABLES: tuple[Variable, ...] = (
     _v("stick_area", "interface", "m2", "stick area"),
     _v("spots", "interface", "1", "number of separate contact spots"),
     _v("position", "component", "m", "horizontal displacement of the particle centroid"),
+    _v("centroid_height", "", "m", "height of the particle's centroid above the lower plate"),
     _v("slip", "interface component", "m",
        "accumulated slip of the particle over the plate while turning"),
     _v("shift", "interface component", "m",
@@ -239,6 +242,177 @@ def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float
                        "origin); orientation as a tilt vector in degrees (the paper's theta "
                        "about +y is its y component); tractions are exerted by the plate on "
                        "the particle; interface order upper, lower",
+    }
+    all_attrs.update(attrs or {})
+    return xr.Dataset(data, coords=coords, attrs=all_attrs)
+
+
+# --- layers ------------------------------------------------------------------------------------
+#: per-step variables of a layer (along ``step`` only)
+LAYER_VARIABLES: tuple[Variable, ...] = (
+    _v("load_value", "", "N or 1", "prescribed load: F_N (N) or compression ratio (1)"),
+    _v("total_force", "", "N", "total normal force F_N on each plate"),
+    _v("plate_gap", "", "m", "plate separation h (force-weighted mean over the loaded "
+                             "particles)"),
+    _v("compression", "", "1", "compression ratio (d0 - h) / d0, d0 the tallest particle's "
+                               "height"),
+    _v("loaded", "", "1", "number of particles the plates press"),
+    _v("fraction_stick", "", "1", "fraction of the loaded particles that stuck"),
+    _v("fraction_roll", "", "1", "fraction of the loaded particles that rolled (about either "
+                                 "plate)"),
+    _v("fraction_rotate", "", "1", "fraction of the loaded particles that rotated about their "
+                                   "centroid"),
+    _v("plate_force", "component", "N",
+       "net tangential force of the particles on the upper plate (minus that on the lower)"),
+    _v("plate_moment", "component", "N m",
+       "tilting moment of the particles' forces on the upper plate, about the origin on the "
+       "lower plate"),
+    _v("time_total", "", "s", "wall time of the step"),
+)
+#: record variables that belong to the layer, not to a particle
+_LAYER_ONLY = {"load_value", "plate_gap", "compression", "time_total"}
+
+
+@dataclass
+class LayerRecord:
+    """One completed step of a layer: the per-particle :class:`StepRecord` objects (layer
+    order) and the layer's variables (:data:`LAYER_VARIABLES`). ``error`` is set when the step
+    ended with two particles touching."""
+
+    step: int
+    load_kind: str
+    particles: list[StepRecord]
+    values: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        values = self.__dict__.get("values")
+        if values is not None and name in values:
+            return values[name]
+        raise AttributeError(name)
+
+    def __getstate__(self) -> dict:
+        return self.__dict__
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
+    @classmethod
+    def from_particles(cls, k: int, step, gap: float, d0: float, records: list[StepRecord],
+                       layer, evs, time_total: float) -> LayerRecord:
+        total = math.fsum(r.normal_force for r in records)
+        loaded = [r for r in records if r.state != "unloaded"]
+        n = max(len(loaded), 1)
+        terms = []                      # (F'_x, F'_y, M_x, M_y) of each loaded particle
+        for r, placed in zip(records, layer, strict=True):
+            if r.state == "unloaded":
+                continue
+            F, (fx, fy) = r.normal_force, r.tangential_force
+            px = placed.xy[0] + r.position[0] + r.centroid[0][0]
+            py = placed.xy[1] + r.position[1] + r.centroid[0][1]
+            terms.append((fx, fy, py * F - r.plate_gap * fy, r.plate_gap * fx - px * F))
+        fx, fy, mx, my = (math.fsum(t[c] for t in terms) for c in range(4))
+        force, moment = (fx, fy), (mx, my)
+        values = dict(
+            load_value=step.value, total_force=total, plate_gap=gap,
+            compression=(d0 - gap) / d0, loaded=len(loaded),
+            fraction_stick=sum(r.state == "stick" for r in loaded) / n,
+            fraction_roll=sum(r.state in ("roll_upper", "roll_lower") for r in loaded) / n,
+            fraction_rotate=sum(r.state == "rotate" for r in loaded) / n,
+            plate_force=tuple(float(v) for v in force),
+            plate_moment=tuple(float(v) for v in moment), time_total=time_total)
+        return cls(k, step.kind, records, values)
+
+
+def _array(var: Variable, values: list, lead: tuple[int, ...]) -> tuple[np.ndarray, dict]:
+    attrs_v = {"units": var.units, "long_name": var.long_name}
+    if var.name == "state":
+        arr = np.array([STATE_CODE[v] for v in values], dtype=np.int8).reshape(lead)
+        attrs_v.update(flag_values=np.arange(len(STATES), dtype=np.int8),
+                       flag_meanings=" ".join(STATES))
+        return arr, attrs_v
+    shape = (*lead, *[len(COORDS[d]) for d in var.dims])
+    dtype = np.int8 if var.name in _FLAGS else np.int64 if var.name in _COUNTS | {"loaded"} \
+        else float
+    return np.array(values, dtype=dtype).reshape(shape), attrs_v
+
+
+def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]], layer,
+                  cell_sizes: list[float], inputs: dict, status: str,
+                  attrs: dict | None = None):
+    """Assemble a layer's results: layer variables along ``step``, per-particle variables along
+    (``step``, ``particle``), maps along (``map_step``, ``particle``) on a lattice of each
+    particle's own cells (``map_i``, ``map_j``: cell indices from its centroid; x = ``x0`` +
+    ``position`` + ``map_i`` · ``cell_size``)."""
+    import xarray as xr
+
+    n = len(layer)
+    steps = np.array([r.step for r in records], dtype=int)
+    data: dict[str, Any] = {}
+    for var in LAYER_VARIABLES:
+        arr, a = _array(var, [r.values[var.name] for r in records], (len(records),))
+        data[var.name] = (("step", *var.dims), arr, a)
+    for var in VARIABLES:
+        if var.name in _LAYER_ONLY:
+            continue
+        values = [p.values[var.name] for r in records for p in r.particles]
+        arr, a = _array(var, values, (len(records), n))
+        data[var.name] = (("step", "particle", *var.dims), arr, a)
+    F = np.array([[p.normal_force for p in r.particles] for r in records]).reshape(-1, n)
+    totals = F.sum(axis=1, keepdims=True)
+    data["load_share"] = (("step", "particle"),
+                          np.divide(F, totals, out=np.zeros_like(F), where=totals > 0),
+                          {"units": "1", "long_name": "the particle's share of F_N"})
+    data["load_kind"] = ("step", np.array([r.load_kind for r in records], dtype=str),
+                         {"long_name": "load control: force or compression"})
+    pos = layer.positions
+    data["x0"] = ("particle", pos[:, 0], {"units": "m", "long_name": "initial centroid x"})
+    data["y0"] = ("particle", pos[:, 1], {"units": "m", "long_name": "initial centroid y"})
+    data["size"] = ("particle", np.array([p.particle.shape.size for p in layer]),
+                    {"units": "m", "long_name": "particle size: largest centroid-to-surface "
+                                                "distance"})
+    data["cell_size"] = ("particle", np.array(cell_sizes, dtype=float),
+                         {"units": "m", "long_name": "the particle's BEM cell size"})
+    data["shape"] = ("particle", np.array([repr(p.particle.shape) for p in layer], dtype=str),
+                     {"long_name": "shape"})
+    coords: dict[str, Any] = {
+        "step": ("step", steps, {"long_name": "load step index"}),
+        "particle": ("particle", np.arange(n), {"long_name": "particle index (layer order)"}),
+    }
+    for d in ("interface", "component", "quaternion_component"):
+        coords[d] = (d, COORDS[d])
+    stored = [(next(m for m in m_list if m is not None).step, m_list)
+              for m_list in maps if any(m is not None for m in m_list)]
+    if stored:
+        present = [m for _, m_list in stored for m in m_list if m is not None]
+        i0, j0, nx, ny = _union(present)
+        coords["map_step"] = ("map_step", np.array([s for s, _ in stored], dtype=int),
+                              {"long_name": "load step of the stored maps"})
+        coords["map_i"] = ("map_i", i0 + np.arange(nx),
+                           {"long_name": "cell index along x from the particle's centroid"})
+        coords["map_j"] = ("map_j", j0 + np.arange(ny),
+                           {"long_name": "cell index along y from the particle's centroid"})
+        for name, (dims, units, long_name) in MAP_VARIABLES.items():
+            blank = np.zeros((len(INTERFACES), *([2] if dims else []), ny, nx),
+                             dtype=np.int8 if name == "status" else float)
+            stacked = np.stack([
+                np.stack([blank if m is None else
+                          np.stack([_place(getattr(m, name)[side], m.windows[side],
+                                           (i0, j0, nx, ny)) for side in INTERFACES])
+                          for m in m_list])
+                for _, m_list in stored])
+            data[name] = (("map_step", "particle", "interface", *dims, "map_j", "map_i"),
+                          stacked, {"units": units, "long_name": long_name})
+    all_attrs = {
+        "title": "thirdbody: a layer of deformable particles between two plates",
+        "thirdbody_version": __version__,
+        "inputs": json.dumps(inputs),
+        "status": status,
+        "conventions": "SI units; x, y horizontal, z up; per-particle vectors in the particle's "
+                       "frame (centroid at the origin) unless stated; orientation as a tilt "
+                       "vector in degrees; tractions are exerted by the plate on the particle; "
+                       "interface order upper, lower; unloaded particles have state 'unloaded' "
+                       "and NaN where a quantity is undefined",
     }
     all_attrs.update(attrs or {})
     return xr.Dataset(data, coords=coords, attrs=all_attrs)

@@ -1,22 +1,29 @@
-"""The quasi-static driver: a deformable particle squeezed between two plates, step by step.
+"""The quasi-static driver: deformable particles squeezed between two plates, step by step.
 
-For each load step (DESIGN.md §3, the paper's eqs 6-11):
+A run is a *layer* of particles (:class:`~thirdbody.layer.Layer`); a single particle is a layer
+of one, through the same code. For each load step (DESIGN.md §3 and §8, the paper's eqs 6-11):
 
-1. Statics (:mod:`thirdbody.particle.statics`): normal contact at both plates, every spot
-   included, under the step's normal force F_N (or, under gap control, the F_N that gives the
-   prescribed plate gap h) at the current orientation; the pressure centroids give the force
-   F' = F_N (r̄_up − r̄_low)/h the lower plate must exert for the particle to stay put.
-2. If |F'| <= μ_min F_N the particle sticks: each interface solves the incremental partial-slip
-   problem with its prescribed tangential force (±F'), carrying the previous step's traction.
-3. Otherwise it turns (:mod:`thirdbody.particle.turning`) to the first stable orientation, about
-   the horizontal axis of its couple; the tangential history restarts. With unequal μ it rolls
-   about the higher-friction interface's stick zone; with equal μ it rotates about its
-   centroid (:func:`thirdbody.rigid.classify`). The centroid's horizontal position and the slip
-   at each plate are integrated along the turn.
+1. **Load.** Under force control the plate gap h is found with Σ F_i(h) = F_N (a monotone
+   scalar root; particles shorter than h carry nothing); under gap control h is prescribed.
+   Each loaded particle's normal contact at both plates is solved at its share F_i, every spot
+   included (:mod:`thirdbody.particle.statics`); its pressure centroids give the force
+   F'_i = F_i (r̄_up − r̄_low)/h its lower plate must exert for it to stay put.
+2. **Turns.** A particle with |F'_i| > μ_min F_i turns (:mod:`thirdbody.particle.turning`) to
+   its first stable orientation, or until it loses its load (then it stops where it last
+   touched and carries nothing for the rest of the step), the others held at their
+   orientations: at each orientation visited, its share under force control follows from the
+   others' compliance (their last solves); under gap control h stays put. With
+   unequal μ it rolls about the higher-friction interface's stick zone, with equal μ it rotates
+   about its centroid (:func:`thirdbody.rigid.classify`); its tangential history restarts.
+3. **Cascades.** A turn changes that particle's height, so under force control h and every
+   share change and other particles may turn: steps 1-2 repeat until no particle turns.
+4. **Partial slip.** Each loaded particle's interfaces solve the incremental partial-slip
+   problem with ±F'_i, carrying that particle's previous traction.
 
-Any failure inside a step (no stable orientation, a solver that does not converge, bad geometry)
-ends the run as a failed step: :meth:`Simulation.run` returns the completed steps with a
-``status`` saying why. All quantities are SI; angles in the results are degrees.
+Any failure inside a step (no stable orientation, a solver that does not converge, bad geometry,
+two particles that a turn brings into contact) ends the run as a failed step:
+:meth:`Simulation.run` returns the completed steps with a ``status`` saying why. All quantities
+are SI; angles in the results are degrees.
 """
 
 from __future__ import annotations
@@ -28,19 +35,29 @@ from collections.abc import Callable, Iterator
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from scipy.optimize import brentq
 
-from .bem import ConvergenceError, TangentialContact
 from .checkpoint import restore, snapshot
+from .layer import Layer, first_overlap
 from .loading import LoadProgram, LoadStep
-from .orientation import Rotation, decompose
-from .particle.interface import InterfaceNormal, Window
+from .orientation import key
+from .particle.member import Member, ParticleState, step_maps
 from .particle.model import Particle, Plates
-from .particle.statics import Evaluation, PairStatics
+from .particle.statics import Evaluation, StaticsError
 from .particle.turning import find_stable_orientation, turn_kinematics
-from .records import STATES, StepMaps, StepRecord, to_dataset
+from .records import STATES, LayerRecord, StepMaps, StepRecord, layer_dataset, to_dataset
 from .rigid import RigidState, classify
 
-__all__ = ["STATES", "ParticleState", "Simulation", "SimulationError", "StepMaps", "StepRecord"]
+__all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError", "StepMaps",
+           "StepRecord"]
+
+#: rounds of turns and rebalancing within one step before a cascade counts as not settling
+MAX_CASCADE_ROUNDS = 25
+#: a particle whose modelled share is below this fraction of F_N counts as unloaded
+MIN_SHARE = 1e-6
+#: the layer's force balance is converged when no share is off by more than this fraction of
+#: F_N (each share's stiffness times the offset of its plate gap from the common one)
+SHARE_TOL = 1e-8
 
 
 class SimulationError(RuntimeError):
@@ -48,36 +65,31 @@ class SimulationError(RuntimeError):
 
 
 @dataclass
-class ParticleState:
-    """Everything one particle carries from one step to the next (what a resume needs).
+class LayerState:
+    """Every particle's :class:`ParticleState` (layer order) and the last plate gap h (m)."""
 
-    ``position`` and the slips are horizontal 2-vectors (m); ``history`` holds each interface's
-    last tangential step and its window; ``force_guess`` the last normal force (N) found under
-    gap control.
-    """
-
-    rotation: Rotation
-    position: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    slip_up: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    slip_low: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    history: dict[str, tuple[Window, TangentialContact]] = field(default_factory=dict)
-    force_guess: float | None = None
+    particles: list[ParticleState]
+    gap: float | None = None
+    shares: list[float] = field(default_factory=list)
 
 
 class Simulation:
-    """A particle between two plates under a load program.
+    """Particles between two plates under a load program.
 
     Parameters
     ----------
-    particle : Particle
+    particle : Particle or Layer
+        One particle (results along ``step``, as for the paper's figures), or a
+        :class:`~thirdbody.layer.Layer` (results along ``step`` and ``particle``).
     plates : Plates
     load : LoadProgram
-        See :mod:`thirdbody.loading`.
+        See :mod:`thirdbody.loading`. For a layer the force is the total F_N on each plate, and
+        compression ratios are relative to d₀ = the tallest particle's height.
     resolution : float
-        Cells per particle size (the largest centroid-to-surface distance): the cell size is
-        ``shape.size / resolution`` (m). Ignored if ``cell_size`` is given.
+        Cells per particle size (the largest centroid-to-surface distance): each particle's cell
+        size is ``shape.size / resolution`` (m). Ignored if ``cell_size`` is given.
     cell_size : float, optional
-        Cell size Δ, m.
+        Cell size Δ, m, for every particle.
     tol : float
         Tolerance of the normal and tangential solvers (dimensionless residuals).
     angle_step_deg, angle_tol_deg : float
@@ -98,15 +110,19 @@ class Simulation:
     #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
     MIN_CONTACT_CELLS = 8
 
-    def __init__(self, particle: Particle, plates: Plates, load: LoadProgram, *,
+    def __init__(self, particle: Particle | Layer, plates: Plates, load: LoadProgram, *,
                  resolution: float = 80.0, cell_size: float | None = None,
                  tol: float = 1e-8, angle_step_deg: float = 1.0, angle_tol_deg: float = 0.01,
                  maps_every: int = 5, classification: str = "statics",
                  twist_tol: float = 1e-3) -> None:
         from ._validate import positive, real
 
-        if not isinstance(particle, Particle):
-            raise TypeError("particle must be a thirdbody.Particle")
+        if isinstance(particle, Layer):
+            self.layer, self.single = particle, False
+        elif isinstance(particle, Particle):
+            self.layer, self.single = Layer.of(particle), True
+        else:
+            raise TypeError("particle must be a thirdbody.Particle or a thirdbody.Layer")
         if not isinstance(plates, Plates):
             raise TypeError("plates must be a thirdbody.Plates")
         if not isinstance(load, LoadProgram):
@@ -116,12 +132,12 @@ class Simulation:
                              f"{classification!r}")
         if isinstance(maps_every, bool) or not isinstance(maps_every, int) or maps_every < 0:
             raise ValueError(f"maps_every must be an integer >= 0, got {maps_every!r}")
-        self.particle, self.plates, self.load = particle, plates, load
-        shape = particle.shape
-        self.cell_size = (positive("cell_size (m)", cell_size) if cell_size is not None
-                          else shape.size / positive("resolution (cells per particle size)",
-                                                     resolution))
-        self.resolution = shape.size / self.cell_size
+        self.plates, self.load = plates, load
+        if cell_size is not None:
+            cells = [positive("cell_size (m)", cell_size)] * len(self.layer)
+        else:
+            res = positive("resolution (cells per particle size)", resolution)
+            cells = [p.particle.shape.size / res for p in self.layer]
         self.tol = positive("tol", tol)
         self.angle_step = math.radians(positive("angle_step_deg (degrees)", angle_step_deg))
         self.angle_tol = math.radians(positive("angle_tol_deg (degrees)", angle_tol_deg))
@@ -130,21 +146,45 @@ class Simulation:
         self.twist_tol = math.inf if twist_tol == math.inf else real(
             "twist_tol", twist_tol, "[0, inf]", lambda x: x >= 0)
         self.schedule: list[LoadStep] = load.schedule()
-        self.d0 = shape.height(particle.orientation)
-        self.statics = PairStatics(shape, particle.material, self.cell_size, self.tol)
-        self.records: list[StepRecord] = []
-        self.maps: list[StepMaps] = []
+        self.members = [Member(p.particle, plates, c, self.tol, self.twist_tol)
+                        for p, c in zip(self.layer, cells, strict=True)]
+        self.cell_size = cells[0]
+        self.resolution = self.layer[0].particle.shape.size / self.cell_size
+        self._resolution_input = None if cell_size is not None else float(resolution)
+        self.d0 = max(m.d0 for m in self.members)
+        self.records: list = []
+        self.maps: list = []
         self.status = "not run"
 
+    # --- the single particle's view ----------------------------------------------------------
+    @property
+    def particle(self) -> Particle:
+        """The first (for a single-particle run: the) particle."""
+        return self.layer[0].particle
+
+    @property
+    def statics(self):
+        """The first particle's :class:`~thirdbody.particle.statics.PairStatics`."""
+        return self.members[0].statics
+
+    @property
+    def interfaces(self):
+        """The first particle's two :class:`~thirdbody.particle.interface.Interface` objects."""
+        return self.members[0].interfaces
+
     # --- inputs, for the results file ------------------------------------------------------
+    def _particle_inputs(self, particle: Particle) -> dict:
+        mat = particle.material
+        return {
+            "shape": repr(particle.shape),
+            "E": mat.E, "nu": mat.nu, "orientation_deg": particle.orientation_deg,
+            "tilt_axis_deg": particle.tilt_axis_deg, "yaw_deg": particle.yaw_deg,
+            "quaternion": [float(v) for v in particle.orientation.as_quat()],
+        }
+
     def inputs(self) -> dict:
         """The run's inputs as plain data (stored as attributes of the results)."""
-        mat = self.particle.material
-        return {
-            "shape": repr(self.particle.shape),
-            "E": mat.E, "nu": mat.nu, "orientation_deg": self.particle.orientation_deg,
-            "tilt_axis_deg": self.particle.tilt_axis_deg, "yaw_deg": self.particle.yaw_deg,
-            "quaternion": [float(v) for v in self.particle.orientation.as_quat()],
+        common = {
             "mu_up": self.plates.mu_up, "mu_low": self.plates.mu_low,
             "load": {"program": type(self.load).__name__, **asdict(self.load)},
             "cell_size": self.cell_size, "resolution": self.resolution, "tol": self.tol,
@@ -153,11 +193,12 @@ class Simulation:
             "maps_every": self.maps_every, "classification": self.classification,
             "twist_tol": self.twist_tol, "d0": self.d0,
         }
-
-    @property
-    def interfaces(self):
-        """The two plates' :class:`~thirdbody.particle.interface.Interface` objects."""
-        return self.statics.interfaces
+        if self.single:
+            return {**self._particle_inputs(self.particle), **common}
+        particles = [{**self._particle_inputs(p.particle), "x": p.xy[0], "y": p.xy[1],
+                      "cell_size": m.cell_size}
+                     for p, m in zip(self.layer, self.members, strict=True)]
+        return {"particles": particles, **common}
 
     # --- the physics of one step -------------------------------------------------------------
     def _stable(self, ev: Evaluation) -> bool:
@@ -167,230 +208,332 @@ class Simulation:
         return classify(ev.demand, self.plates.mu_up, self.plates.mu_low,
                         classification=self.classification, mu_rtol=self.plates.mu_rtol)
 
-    def _evaluate(self, rotation: Rotation, step: LoadStep, state: ParticleState) -> Evaluation:
-        ev = self.statics.evaluate(rotation, step, self.d0, state.force_guess)
+    def _equilibrium(self, step: LoadStep, state: LayerState,
+                     evs: list[Evaluation | None] | None,
+                     excluded: frozenset[int] = frozenset()) -> list[Evaluation | None]:
+        """Every particle's normal equilibrium under the step's load at its current orientation;
+        ``evs`` are the evaluations so far in the step (kept where still valid); the
+        ``excluded`` particles carry nothing (they lost their load while turning)."""
+        rotations = [s.rotation for s in state.particles]
+        members = self.members
         if step.kind == "compression":
-            state.force_guess = ev.force
-        return ev
+            if evs is not None:             # h is fixed: a turn changes nobody else
+                return [None if i in excluded else ev for i, ev in enumerate(evs)]
+            h = self.d0 * (1.0 - step.value)
+            if len(members) == 1:
+                return [members[0].at_gap(rotations[0], h, state.particles[0])]
+            out = [m.at_gap(r, h, s) if m.reach(r) > h else None
+                   for m, r, s in zip(members, rotations, state.particles, strict=True)]
+            if all(ev is None for ev in out):
+                tallest = max(m.reach(r) for m, r in zip(members, rotations, strict=True))
+                raise StaticsError(f"prescribed plate gap {h:.6g} m does not touch any particle "
+                                   f"(the tallest is {tallest:.6g} m)")
+            return out
+        total = step.value
+        if len(members) == 1:                   # it carries all: no gap search
+            if evs is not None and evs[0] is not None and evs[0].force == total:
+                return evs
+            return [members[0].at_force(rotations[0], total)]
+        return self._share_load(total, rotations, evs, excluded)
+
+    def _share_load(self, total: float, rotations, evs,
+                    excluded: frozenset[int] = frozenset()) -> list[Evaluation | None]:
+        """Force control of a layer: the plate gap h with Σ F_i(h) = ``total`` (N).
+
+        Each iteration models every particle's force at gap h from its last two solves at its
+        orientation (a power law, :meth:`Member.force_at`), finds h from the modelled sum
+        (Brent), and solves each loaded particle at its modelled share, scaled so that the
+        shares add up to ``total`` exactly. Sums are exactly rounded (``math.fsum``), so the
+        result does not depend on the order of the particles. It stops when every loaded
+        particle's plate gap h_i agrees with their force-weighted mean h so well that its
+        share is off by at most ``SHARE_TOL`` F_N (1.5 F_i |h_i − h| / δ_i, δ_i its total
+        approach; for Hertz contacts this is the force error) and no
+        unloaded particle would carry more than 10 ``MIN_SHARE`` of the load there (a margin
+        over the ``MIN_SHARE`` below which a modelled share is dropped, so that a particle on
+        the threshold cannot make the iteration cycle)."""
+        members, n = self.members, len(self.members)
+        reach = np.array([m.reach(r) for m, r in zip(members, rotations, strict=True)])
+        evs = list(evs) if evs is not None else [None] * n
+        active = [i for i in range(n) if i not in excluded]
+        for i in excluded:
+            evs[i] = None
+        for _ in range(60):
+            loaded = [i for i in range(n) if evs[i] is not None]
+            if loaded and abs(math.fsum(evs[i].force for i in loaded) - total) <= 1e-12 * total:
+                h = math.fsum(evs[i].force * evs[i].gap for i in loaded) / total
+                # each share's error: its stiffness (Hertz, 1.5 F/δ) times its gap's offset
+                if all(1.5 * evs[i].force * abs(evs[i].gap - h)
+                       <= SHARE_TOL * total * max(members[i].points[-1][2], 0.0)
+                       for i in loaded) and \
+                        all(members[j].force_at(rotations[j], h) < 10 * MIN_SHARE * total
+                            for j in active if evs[j] is None):
+                    return evs
+
+            def excess(gap: float) -> float:
+                return math.fsum(members[i].force_at(rotations[i], gap) for i in active) - total
+
+            top = float(reach[active].max())
+            depth = 1e-3 * top
+            while excess(top - depth) < 0:
+                depth *= 2.0
+                if depth > top:
+                    raise StaticsError("the plate gap for the normal force could not be found")
+            h = brentq(excess, top - depth, top, xtol=1e-15 * top, rtol=1e-15)
+            forces = np.array([members[i].force_at(rotations[i], h) if i in active else 0.0
+                               for i in range(n)])
+            forces[forces < MIN_SHARE * total] = 0.0
+            forces *= total / math.fsum(forces)
+            for i in range(n):
+                evs[i] = (members[i].at_force(rotations[i], float(forces[i]))
+                          if forces[i] > 0 else None)
+        raise StaticsError("the plate gap for the normal force did not settle in 60 iterations")
 
     def preflight(self) -> int:
-        """Solve the largest load at the initial orientation once and check the resolution.
-        Returns the contact's extent in cells.
+        """Solve the largest load at the initial orientations once and check the resolution.
+        Returns the smallest checked contact's extent in cells.
 
-        Raises ValueError (naming ``resolution``) when the contact at the largest load spans
-        fewer than :attr:`MIN_CONTACT_CELLS` cells: the solution would not be resolved.
+        Raises ValueError (naming ``resolution``) when a contact at the largest load spans
+        fewer than :attr:`MIN_CONTACT_CELLS` cells: the solution would not be resolved. In a
+        layer, the particles carrying at least a tenth of the load (or the most loaded one)
+        are checked.
         Raises :class:`SimulationError` when that load cannot be solved at all.
         """
         step = max(self.schedule, key=lambda s: s.value)
-        state = ParticleState(self.particle.orientation)
+        state = self._initial_state()
         try:
-            ev = self._evaluate(self.particle.orientation, step, state)
+            evs = self._equilibrium(step, state, None)
         except Exception as exc:
             raise SimulationError(f"the largest load cannot be solved: {exc}") from exc
         finally:
-            for i in self.interfaces.values():
-                i.last = None
-        extent = 0
-        for sol in (ev.up, ev.low):
-            c = sol.contact.contact
-            rows, cols = np.flatnonzero(c.any(axis=1)), np.flatnonzero(c.any(axis=0))
-            extent = max(extent, rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1)
-        if extent < self.MIN_CONTACT_CELLS:
-            needed = self.resolution * self.MIN_CONTACT_CELLS / max(extent, 1)
-            raise ValueError(
-                f"resolution (cells per particle size) {self.resolution:.4g} is too coarse: the "
-                f"contact at the largest load spans {extent} cells; use at least {needed:.0f}")
-        return int(extent)
-
-    def step(self, k: int, state: ParticleState) -> tuple[StepRecord, StepMaps | None]:
-        """Run load step ``k`` from ``state`` (updated in place). Raises on failure."""
-        step = self.schedule[k]
-        t_start = time.perf_counter()
-        normal0, geometry0 = self.statics.normal_time, self.statics.geometry_time
-        start_rotation = state.rotation
-        ev0 = self._evaluate(state.rotation, step, state)
-        kind, balanced, evaluations = RigidState.STICK, False, 1
-        final = ev0
-        if not self._stable(ev0):
-            kind = self._classify(ev0)
-            turn = find_stable_orientation(
-                ev0, lambda r: self._evaluate(r, step, state), self.plates.mu_min,
-                self.angle_step, self.angle_tol)
-            final, balanced, evaluations = turn.final, turn.balanced, turn.evaluations
-            moved = turn_kinematics([*turn.path, final], self._classify)
-            state.position = state.position + moved.position
-            state.slip_up = state.slip_up + moved.slip_up
-            state.slip_low = state.slip_low + moved.slip_low
-            state.history.clear()
-            state.rotation = final.rotation
-        t_tangential = time.perf_counter()
-        tangential = self._tangential(final, state)
-        t_tangential = time.perf_counter() - t_tangential
-        record = self._record(k, step, ev0, final, kind, balanced, start_rotation, tangential,
-                              state, evaluations)
-        record.values.update(
-            time_normal=self.statics.normal_time - normal0,
-            time_geometry=self.statics.geometry_time - geometry0,
-            time_tangential=t_tangential, time_total=time.perf_counter() - t_start)
-        maps = None
-        if self.maps_every and (k % self.maps_every == 0 or k == len(self.schedule) - 1):
-            maps = _maps(k, final, tangential)
-        return record, maps
-
-    def _tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
-        """Partial slip at both plates with the forces ±F'; if the tractions leave a twisting
-        moment about z above ``twist_tol`` (relative to max(μ) F_N a), the particle's twist
-        relative to the plates becomes an unknown, found by Illinois iterations on the total
-        moment (monotone in the twist)."""
-        # the plates can transmit at most μ_min F_N; only a balanced turn ends beyond it
-        cap = self.plates.mu_min * ev.force
-        demand = ev.demand_force
-        norm = math.hypot(*demand)
-        if norm > cap:
-            demand = demand * (cap / norm) if norm > 0 else demand
-        sides = (("low", ev.low, 1.0, self.plates.mu_low), ("up", ev.up, -1.0, self.plates.mu_up))
-
-        def solve(twist: float | None) -> dict[str, TangentialContact]:
-            out = {}
-            for side, sol, sign, mu in sides:
-                force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
-                out[side] = self.interfaces[side].solve_tangential(
-                    sol, mu, force, state.history.get(side), twist=twist)
-            return out
-
-        out = solve(None)
-        mu_max = max(self.plates.mu_up, self.plates.mu_low)
-        radius = math.sqrt(max(ev.up.contact.area, ev.low.contact.area) / math.pi)
-        scale = mu_max * ev.force * radius
-
-        def moment(t: dict[str, TangentialContact]) -> float:
-            return t["up"].moment + t["low"].moment
-
-        m0 = moment(out)
-        if scale > 0 and abs(m0) > self.twist_tol * scale:
-            out = self._balance_twist(solve, out, m0, scale)
-        for side, sol, _, _ in sides:
-            state.history[side] = (sol.window, out[side])
-        return out
-
-    def _balance_twist(self, solve, start, m0: float, scale: float):
-        """The plates' twist ω (rad) at which the moments of both plates' tractions cancel.
-
-        The first step uses the torsional stiffness of bonded discs of the contact sizes,
-        (16/3) G a³ each, an upper bound, so it falls short; the steps then grow (secant, at
-        most 4x) until the moment changes sign, and Illinois iterations close the bracket. A
-        twist at which the plates can no longer transmit F' (everything slips) is an overshoot:
-        the step is halved."""
-        G = self.particle.material.G
-        stiffness = sum(16 / 3 * G * (t.normal.area / math.pi) ** 1.5 for t in start.values())
-        tol = self.twist_tol * scale
-
-        def moment_at(w: float):
-            out = solve(w)
-            return out["up"].moment + out["low"].moment, out
-
-        a_w, a_m = start["up"].twist, m0
-        step = -m0 / stiffness
-        b_w = b_m = b_out = None
-        for _ in range(60):                 # extend until the moment changes sign
-            try:
-                b_m, b_out = moment_at(a_w + step)
-            except (ConvergenceError, ValueError):
-                step *= 0.5                 # beyond what the plates can hold: overshoot
+            for m in self.members:
+                m.points = []
+                for i in m.interfaces.values():
+                    i.last = None
+        smallest, which = None, 0
+        total = math.fsum(ev.force for ev in evs if ev is not None)
+        biggest = max(ev.force for ev in evs if ev is not None)
+        for k, ev in enumerate(evs):
+            # in a layer, the particles that carry a tenth of the load or more (the lightly
+            # loaded ones have small contacts whatever the grid, and matter little)
+            if ev is None or (ev.force < 0.1 * total and ev.force < biggest):
                 continue
-            b_w = a_w + step
-            if abs(b_m) <= tol:
-                return b_out
-            if (b_m > 0) != (a_m > 0):
+            extent = 0
+            for sol in (ev.up, ev.low):
+                c = sol.contact.contact
+                rows, cols = np.flatnonzero(c.any(axis=1)), np.flatnonzero(c.any(axis=0))
+                extent = max(extent, rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1)
+            if smallest is None or extent < smallest:
+                smallest, which = extent, k
+        if smallest < self.MIN_CONTACT_CELLS:
+            member = self.members[which]
+            res = member.particle.shape.size / member.cell_size
+            needed = res * self.MIN_CONTACT_CELLS / max(smallest, 1)
+            where = "" if self.single else f" of particle {which}"
+            raise ValueError(
+                f"resolution (cells per particle size) {res:.4g} is too coarse: the contact"
+                f"{where} at the largest load spans {smallest} cells; use at least "
+                f"{needed:.0f}")
+        return int(smallest)
+
+    def _initial_state(self) -> LayerState:
+        return LayerState([ParticleState(p.particle.orientation) for p in self.layer])
+
+    def step(self, k: int, state: LayerState):
+        """Run load step ``k`` from ``state`` (updated in place). Returns (record, maps or
+        None): a :class:`StepRecord` for a single particle, a :class:`LayerRecord` for a layer.
+        Raises on failure; a step that ends with two particles touching returns its record
+        with ``error`` set (the run then stops)."""
+        step = self.schedule[k]
+        n = len(self.members)
+        t_start = time.perf_counter()
+        clock0 = [(m.statics.normal_time, m.statics.geometry_time) for m in self.members]
+        starts = [s.rotation for s in state.particles]
+        evs = self._equilibrium(step, state, None)
+        first = list(evs)
+        kinds = [RigidState.STICK] * n
+        balanced = [False] * n
+        counts = [1 if ev is not None else 0 for ev in evs]
+        settled: dict[int, tuple] = {}
+        excluded: set[int] = set()
+        for _ in range(MAX_CASCADE_ROUNDS):
+            # a turn that ended at a balance (or where the particle lost its load) is not
+            # repeated for a change of its share alone
+            unstable = [i for i, ev in enumerate(evs) if ev is not None
+                        and not self._stable(ev) and settled.get(i) != key(ev.rotation)]
+            if not unstable:
                 break
-            step *= min(max(a_m / (a_m - b_m), 1.0), 4.0) if a_m != b_m else 2.0
-            a_w, a_m = b_w, b_m
+            for i in unstable:
+                if self._turn(i, step, state, evs, kinds, balanced, counts, settled):
+                    excluded.add(i)
+            evs = self._equilibrium(step, state, evs, frozenset(excluded))
         else:
-            raise ConvergenceError("the twisting moment about z could not be balanced")
-        for _ in range(40):                 # Illinois on the bracket between a and b
-            w = b_w - b_m * (b_w - a_w) / (b_m - a_m)
-            m, out = moment_at(w)
-            if abs(m) <= tol:
-                return out
-            if (m > 0) != (b_m > 0):
-                a_w, a_m = b_w, b_m
+            raise SimulationError(f"the layer did not settle: particles still turned after "
+                                  f"{MAX_CASCADE_ROUNDS} rounds of turns and load sharing")
+        t_tan = []
+        tangential: list[dict | None] = []
+        for m, ev, s in zip(self.members, evs, state.particles, strict=True):
+            t0 = time.perf_counter()
+            if ev is None:
+                s.history.clear()
+                tangential.append(None)
             else:
-                a_m *= 0.5
-            b_w, b_m, b_out = w, m, out
-        raise ConvergenceError("the twisting moment about z could not be balanced")
+                tangential.append(m.tangential(ev, s))
+            t_tan.append(time.perf_counter() - t0)
+        gap = self._gap(evs)
+        records = []
+        for i, (m, ev, s) in enumerate(zip(self.members, evs, state.particles, strict=True)):
+            if ev is None:
+                r = m.unloaded_record(k, step, self.d0, gap, s, starts[i],
+                                      kinds[i] is not RigidState.STICK)
+            else:
+                r = m.record(k, step, self.d0, first[i] or ev, ev, kinds[i], balanced[i],
+                             starts[i], tangential[i], s, counts[i])
+            normal0, geometry0 = clock0[i]
+            r.values.update(time_normal=m.statics.normal_time - normal0,
+                            time_geometry=m.statics.geometry_time - geometry0,
+                            time_tangential=t_tan[i])
+            records.append(r)
+        total = time.perf_counter() - t_start
+        want_maps = self.maps_every and (k % self.maps_every == 0
+                                         or k == len(self.schedule) - 1)
+        maps = [step_maps(k, ev, t) if want_maps and ev is not None else None
+                for ev, t in zip(evs, tangential, strict=True)]
+        if self.single:
+            records[0].values["time_total"] = total
+            return records[0], maps[0] if want_maps else None
+        for r in records:
+            r.values["time_total"] = math.nan
+        record = LayerRecord.from_particles(k, step, gap, self.d0, records, self.layer, evs,
+                                            total)
+        record.error = self._clearance(state, evs)
+        return record, (maps if want_maps else None)
 
-    def _record(self, k: int, step: LoadStep, ev0: Evaluation, ev: Evaluation,
-                kind: RigidState, balanced: bool, start_rotation: Rotation,
-                tangential: dict[str, TangentialContact], state: ParticleState,
-                evaluations: int) -> StepRecord:
-        mu = {"up": self.plates.mu_up, "low": self.plates.mu_low}
-        F, h = ev.force, ev.gap
-        t = {"up": tangential["up"], "low": tangential["low"]}
-        sols = {"up": ev.up, "low": ev.low}
+    def _turn(self, i: int, step: LoadStep, state: LayerState, evs, kinds, balanced, counts,
+              settled) -> bool:
+        """Turn particle ``i`` to its first stable orientation at its share (force control) or
+        at the plate gap (gap control); integrate its kinematics. Returns True when it lost its
+        load on the way (a layer): it stops where it last touched and carries nothing for the
+        rest of the step (its share there vanishes with the bisection tolerance; the others take
+        it)."""
+        m, s, ev = self.members[i], state.particles[i], evs[i]
+        if kinds[i] is RigidState.STICK:
+            kinds[i] = self._classify(ev)
+        if step.kind == "compression":
+            h = self.d0 * (1.0 - step.value)
 
-        def ratio(side: str, demand: float) -> float:
-            return demand / mu[side] if mu[side] > 0 else math.nan
+            def evaluate(r):
+                if len(self.members) > 1 and m.reach(r) <= h:
+                    return Evaluation.unloaded(r)
+                return m.at_gap(r, h, s)
+        elif len(self.members) == 1:
+            total = ev.force
 
-        # balances recomputed from the fields
-        force, first, twist = {}, {}, 0.0
-        for side, sol in sols.items():
-            X, Y = sol.contact.grid.mesh()
-            dA = sol.contact.grid.cell_area
-            p = sol.contact.pressure
-            force[side] = float(p.sum() * dA)
-            first[side] = np.array([(p * X).sum(), (p * Y).sum()]) * dA
-            tau = t[side].traction
-            twist += float((X * tau[1] - Y * tau[0]).sum() * dA)
-        T_up, T_low = t["up"].force, t["low"].force
-        offset = first["up"] / force["up"] - first["low"] / force["low"]
-        moment = F * offset + h * T_up
-        radius = math.sqrt(max(s.contact.area for s in sols.values()) / math.pi)
-        mu_max = max(mu.values())
-        tilt = decompose(ev.rotation)
-        turn = (ev.rotation * start_rotation.inv()).as_rotvec()
-        sides = ("up", "low")
-        values = dict(
-            load_value=step.value, normal_force=F, plate_gap=h,
-            compression=(self.d0 - h) / self.d0,
-            quaternion=tuple(float(v) for v in ev.rotation.as_quat()),
-            orientation=tilt.vector_deg, tilt=tilt.angle_deg, tilt_azimuth=tilt.azimuth_deg,
-            yaw=tilt.yaw_deg,
-            rotation=(math.degrees(turn[0]) + 0.0, math.degrees(turn[1]) + 0.0),
-            rotation_angle=math.degrees(float(np.linalg.norm(turn))),
-            state=kind.value, turned=kind is not RigidState.STICK, balanced=balanced,
-            tangential_force=(float(ev.demand_force[0]), float(ev.demand_force[1])),
-            demand_ratio=tuple(ratio(s, ev0.demand) for s in sides),
-            ratio=tuple(ratio(s, ev.demand) for s in sides),
-            centroid=tuple(sols[s].centroid for s in sides),
-            approach=tuple(_approach(sols[s]) for s in sides),
-            contact_area=tuple(sols[s].contact.area for s in sides),
-            stick_area=tuple(t[s].stick_area for s in sides),
-            spots=tuple(sols[s].spots for s in sides),
-            position=tuple(state.position), slip=(tuple(state.slip_up), tuple(state.slip_low)),
-            shift=tuple(tuple(float(v) for v in t[s].shift) for s in sides),
-            normal_iterations=tuple(sols[s].contact.iterations for s in sides),
-            tangential_iterations=tuple(t[s].iterations for s in sides),
-            normal_residual=tuple(sols[s].contact.residual for s in sides),
-            tangential_residual=tuple(t[s].residual for s in sides),
-            force_residual=abs(force["up"] - force["low"]) / F,
-            tangential_force_residual=float(np.hypot(*(T_up + T_low))) / F,
-            moment_residual=float(np.hypot(*moment)) / (F * h),
-            twist_moment=twist,
-            twist_ratio=abs(twist) / (mu_max * F * radius) if mu_max > 0 else 0.0,
-            twist_angle=-math.degrees(t["up"].twist) + 0.0,
-            turn_evaluations=evaluations,
-            time_total=0.0, time_normal=0.0, time_tangential=0.0, time_geometry=0.0,
-        )
-        return StepRecord(k, step.kind, values)
+            def evaluate(r):
+                return m.at_force(r, total)
+        else:
+            rotations = [p.rotation for p in state.particles]
+            guess = [ev.force]
+
+            def evaluate(r):
+                out = self._share_while_turning(i, r, step.value, rotations, guess[0])
+                if out.force > 0:
+                    guess[0] = out.force
+                return out
+        turn = find_stable_orientation(ev, evaluate, self.plates.mu_min, self.angle_step,
+                                       self.angle_tol)
+        kinematics = turn_kinematics([*turn.path, turn.final], self._classify)
+        s.position = s.position + kinematics.position
+        s.slip_up = s.slip_up + kinematics.slip_up
+        s.slip_low = s.slip_low + kinematics.slip_low
+        s.history.clear()
+        s.rotation = turn.final.rotation
+        m.restart_points(turn.final)        # the search ended elsewhere: model the final one
+        evs[i] = turn.final
+        balanced[i] = turn.balanced
+        counts[i] = turn.evaluations if counts[i] <= 1 else counts[i] + turn.evaluations
+        if turn.balanced and not turn.lost_load:
+            settled[i] = key(turn.final.rotation)       # a balance of the couple
+        return turn.lost_load and len(self.members) > 1
+
+    def _share_while_turning(self, i: int, rotation, total: float, rotations,
+                             guess: float) -> Evaluation:
+        """Particle ``i`` at ``rotation`` under force control, the others held at their
+        orientations: its share F_i with F_i + Σ_j F_j(h_i) = ``total``, the others' forces
+        from their compliance models (:meth:`Member.force_at`), by Illinois iterations on F_i
+        in [0, total] (the residual grows with F_i). Unloaded (:meth:`Evaluation.unloaded`)
+        when the others alone hold the plates above its top."""
+        m = self.members[i]
+        others = [(self.members[j], rotations[j]) for j in range(len(self.members)) if j != i]
+
+        def rest(gap: float) -> float:
+            return math.fsum(mj.force_at(rj, gap) for mj, rj in others)
+
+        reach = m.reach(rotation)
+        lo_f, lo_r = 0.0, rest(reach) - total
+        if lo_r >= 0:
+            return Evaluation.unloaded(rotation)
+        hi_f = hi_r = None
+        F = min(max(guess, 1e-3 * total), total)
+        best = None
+        side = 0
+        for _ in range(40):
+            ev = m.at_force(rotation, F)
+            r = F + rest(ev.gap) - total
+            best = ev
+            if abs(r) <= 1e-9 * total:
+                break
+            if r > 0:
+                hi_f, hi_r = F, r
+                if side == 1:
+                    lo_r *= 0.5
+                side = 1
+            else:
+                lo_f, lo_r = F, r
+                if side == -1 and hi_r is not None:
+                    hi_r *= 0.5
+                side = -1
+            if hi_f is None:
+                F = min(2.0 * F, total)
+            else:
+                F = lo_f - lo_r * (hi_f - lo_f) / (hi_r - lo_r)
+                if not lo_f < F < hi_f:
+                    F = 0.5 * (lo_f + hi_f)
+            if F <= MIN_SHARE * total:
+                return Evaluation.unloaded(rotation)
+        return best
+
+    @staticmethod
+    def _gap(evs) -> float:
+        loaded = [ev for ev in evs if ev is not None]
+        if len(loaded) == 1:
+            return loaded[0].gap
+        total = math.fsum(ev.force for ev in loaded)
+        return math.fsum(ev.force * ev.gap for ev in loaded) / total
+
+    def _clearance(self, state: LayerState, evs) -> str | None:
+        """None, or a message naming two particles whose solids overlap after the step."""
+        rotations = [s.rotation for s in state.particles]
+        centres = []
+        for p, m, s, ev in zip(self.layer, self.members, state.particles, evs, strict=True):
+            lift = -(ev.low.plate if ev is not None else m.lowest(s.rotation))
+            centres.append((p.xy[0] + s.position[0], p.xy[1] + s.position[1], lift))
+        hit = first_overlap([m.particle.shape for m in self.members], rotations,
+                            np.array(centres))
+        if hit is None:
+            return None
+        i, j, x, y = hit
+        return (f"particles {i} and {j} touch (near x = {x:.4g} m, y = {y:.4g} m): the layer "
+                "model has no particle-particle contact")
 
     # --- the run -------------------------------------------------------------------------
-    def steps(self, state: ParticleState | None = None, start: int = 0,
-              ) -> Iterator[tuple[StepRecord, StepMaps | None, ParticleState]]:
+    def steps(self, state: LayerState | None = None, start: int = 0,
+              ) -> Iterator[tuple[object, object, LayerState]]:
         """Run the load steps from ``start``; yields (record, maps or None, state) per step.
 
-        Raises :class:`SimulationError` when a step cannot be completed, whatever the cause.
+        Raises :class:`SimulationError` when a step cannot be completed, whatever the cause
+        (after yielding the step that brought two particles into contact).
         """
-        state = state or ParticleState(self.particle.orientation)
+        state = state or self._initial_state()
         for k in range(start, len(self.schedule)):
             step = self.schedule[k]
             try:
@@ -400,15 +543,18 @@ class Simulation:
                 raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): "
                                       f"{reason}") from exc
             yield record, maps, state
+            error = getattr(record, "error", None)
+            if error:
+                raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): {error}")
 
-    def run(self, progress: Callable[[StepRecord], None] | None = None,
-            checkpoint: Callable[[Simulation, ParticleState], None] | None = None,
+    def run(self, progress: Callable | None = None,
+            checkpoint: Callable[[Simulation, LayerState], None] | None = None,
             resume_from: bytes | None = None):
         """Run every load step and return the history as an :class:`xarray.Dataset`.
 
-        ``progress`` is called with each completed :class:`StepRecord`; ``checkpoint`` with the
-        simulation and its state after each step (to save :meth:`snapshot`). ``resume_from``
-        is a snapshot: the run continues after its last completed step and ends exactly as an
+        ``progress`` is called with each completed record; ``checkpoint`` with the simulation
+        and its state after each step (to save :meth:`snapshot`). ``resume_from`` is a
+        snapshot: the run continues after its last completed step and ends exactly as an
         uninterrupted one. A step that cannot be completed stops the run: the dataset then
         holds the completed steps, its ``status`` attribute says why, and a warning is issued.
         """
@@ -433,39 +579,19 @@ class Simulation:
             warnings.warn(f"simulation stopped: {exc}", RuntimeWarning, stacklevel=2)
         return self.dataset()
 
-    def snapshot(self, state: ParticleState) -> bytes:
+    def snapshot(self, state: LayerState) -> bytes:
         """Everything needed to continue after the last completed step (pickled)."""
         return snapshot(self, state)
 
-    def restore(self, blob: bytes) -> tuple[ParticleState, int]:
+    def restore(self, blob: bytes) -> tuple[LayerState, int]:
         """Load a :meth:`snapshot`; returns (state, index of the next step). The snapshot must
         come from a run with the same inputs."""
         return restore(self, blob)
 
     def dataset(self):
         """The records and maps collected so far as an :class:`xarray.Dataset`."""
-        return to_dataset(self.records, self.maps, self.cell_size, self.inputs(), self.status)
-
-
-def _approach(sol: InterfaceNormal) -> float:
-    """Approach (m) of the plate measured from the lowest (highest) surface cell."""
-    g = sol.contact.gap
-    return float(sol.contact.approach - g[np.isfinite(g)].min())
-
-
-def _maps(k: int, ev: Evaluation, tangential: dict[str, TangentialContact]) -> StepMaps:
-    """The fields of both interfaces on the bounding box of their contacts (one free cell
-    around)."""
-    windows, pressure, traction, status = {}, {}, {}, {}
-    for side, sol, t in (("upper", ev.up, tangential["up"]), ("lower", ev.low, tangential["low"])):
-        c = sol.contact.contact
-        rows, cols = np.flatnonzero(c.any(axis=1)), np.flatnonzero(c.any(axis=0))
-        j0, j1 = max(rows[0] - 1, 0), min(rows[-1] + 2, c.shape[0])
-        i0, i1 = max(cols[0] - 1, 0), min(cols[-1] + 2, c.shape[1])
-        w = sol.window
-        windows[side] = (w.i0 + int(i0), w.j0 + int(j0), int(i1 - i0), int(j1 - j0))
-        pressure[side] = sol.contact.pressure[j0:j1, i0:i1].copy()
-        traction[side] = t.traction[:, j0:j1, i0:i1].copy()
-        status[side] = np.where(t.stick, 1, np.where(t.slip, 2, 0)).astype(np.int8)[j0:j1,
-                                                                                     i0:i1]
-    return StepMaps(k, windows, pressure, traction, status)
+        if self.single:
+            return to_dataset(self.records, self.maps, self.cell_size, self.inputs(),
+                              self.status)
+        return layer_dataset(self.records, self.maps, self.layer,
+                             [m.cell_size for m in self.members], self.inputs(), self.status)

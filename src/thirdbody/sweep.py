@@ -55,7 +55,7 @@ import numpy as np
 from .io.config import Config, ConfigError, parse_config
 from .io.results import RESUME_VARIABLE, run_to_file, write_results
 from .records import COORDS as _RECORD_COORDS
-from .records import VARIABLES
+from .records import LAYER_VARIABLES, VARIABLES
 
 __all__ = [
     "BEHAVIOURS",
@@ -87,6 +87,8 @@ _KEY_UNITS = {
     "particle.radius": "m", "particle.semi_axes": "m", "particle.amplitude": "1",
     "particle.seed": "1", "particle.n_waves": "1", "load.stop": "N", "load.hold": "N",
     "numerics.resolution": "cells per particle size",
+    "layer.size": "m", "layer.size_std": "m", "layer.count": "1", "layer.area_fraction": "1",
+    "layer.max_tilt_deg": "degree", "layer.seed": "1", "layer.E": "Pa", "layer.nu": "1",
 }
 
 
@@ -578,7 +580,11 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
 # --- the summary -----------------------------------------------------------------------------
 _SUMMARY_INPUTS = ("turned", "state", "quaternion", "ratio", "compression", "normal_force",
                    "time_total")
-_SUMMARY_NAMES = tuple(dict.fromkeys((*_SUMMARY_INPUTS, *STEP_VARIABLES)))
+#: per-step layer variables copied into the summary of a sweep over layers
+LAYER_STEP_VARIABLES = ("total_force", "compression", "loaded", "fraction_stick",
+                        "fraction_roll", "fraction_rotate")
+_SUMMARY_NAMES = tuple(dict.fromkeys((*_SUMMARY_INPUTS, *STEP_VARIABLES,
+                                      *LAYER_STEP_VARIABLES)))
 
 
 def _total_rotation(case: _CaseData) -> tuple[float, float]:
@@ -600,6 +606,10 @@ def _total_rotation(case: _CaseData) -> tuple[float, float]:
     return sign * angle, math.degrees(math.atan2(vector[1], vector[0]))
 
 
+def _is_layer(case: _CaseData) -> bool:
+    return "total_force" in case.arrays
+
+
 def _case_summary(case: _CaseData) -> dict:
     """Scalar summaries of one case's per-step results."""
     from .simulation import STATES
@@ -610,9 +620,13 @@ def _case_summary(case: _CaseData) -> dict:
     out = {"steps_done": n, "total_rotation": nan, "turn_azimuth": nan, "first_turn_force": nan,
            "first_turn_compression": nan, "turning_steps": 0, "final_state": -1,
            "final_ratio_up": nan, "final_ratio_low": nan, "final_compression": nan,
-           "behaviour": _BEHAVIOUR_CODE["failed"], "compute_time": 0.0}
+           "behaviour": _BEHAVIOUR_CODE["failed"], "compute_time": 0.0,
+           "final_loaded": nan, "final_fraction_stick": nan, "final_fraction_roll": nan,
+           "final_fraction_rotate": nan}
     if n == 0:
         return out
+    if _is_layer(case):
+        return _layer_case_summary(case, out)
     turned = np.flatnonzero(a["turned"].astype(bool))
     state = a["state"]
     total, azimuth = _total_rotation(case)
@@ -632,6 +646,32 @@ def _case_summary(case: _CaseData) -> dict:
     return out
 
 
+def _layer_case_summary(case: _CaseData, out: dict) -> dict:
+    """Scalar summaries of a layer case: the first step in which any particle turned, the
+    final loaded count and state fractions; the behaviour is that of the first particle to
+    turn (``stick`` if none did)."""
+    from .simulation import STATES
+
+    a = case.arrays
+    turned = a["turned"].astype(bool)                      # (step, particle)
+    steps = np.flatnonzero(turned.any(axis=1))
+    out.update(turning_steps=int(steps.size), final_compression=float(a["compression"][-1]),
+               compute_time=float(np.sum(a["time_total"])),
+               final_loaded=float(a["loaded"][-1]),
+               final_fraction_stick=float(a["fraction_stick"][-1]),
+               final_fraction_roll=float(a["fraction_roll"][-1]),
+               final_fraction_rotate=float(a["fraction_rotate"][-1]))
+    first = "stick"
+    if steps.size:
+        k = steps[0]
+        out.update(first_turn_force=float(a["total_force"][k]),
+                   first_turn_compression=float(a["compression"][k]))
+        first = STATES[int(a["state"][k][np.flatnonzero(turned[k])[0]])]
+    if case.status == "complete" and not case.partial:
+        out["behaviour"] = _BEHAVIOUR_CODE.get(first, _BEHAVIOUR_CODE["failed"])
+    return out
+
+
 _SUMMARY_VARIABLES = {
     "behaviour": ("1", "behaviour over the run: " + ", ".join(BEHAVIOURS)),
     "total_rotation": ("degree", "angle from the initial to the final orientation, negative "
@@ -647,6 +687,13 @@ _SUMMARY_VARIABLES = {
     "final_compression": ("1", "compression (d0 - h)/d0 at the last step"),
     "steps_done": ("1", "load steps completed"),
     "compute_time": ("s", "wall time of the case's load steps (sum of time_total)"),
+    "final_loaded": ("1", "layers: particles loaded at the last step"),
+    "final_fraction_stick": ("1", "layers: fraction of the loaded particles sticking at the "
+                                  "last step"),
+    "final_fraction_roll": ("1", "layers: fraction of the loaded particles rolling at the "
+                                 "last step"),
+    "final_fraction_rotate": ("1", "layers: fraction of the loaded particles rotating at the "
+                                   "last step"),
 }
 
 
@@ -718,8 +765,9 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
     if len(complete) == 1:                      # per-step scalars share one step axis
         n_steps = complete.pop()
         coords["step"] = ("step", np.arange(n_steps), {"long_name": "load step index"})
-        extra_dims = {v.name: v.dims for v in VARIABLES}
-        for name in STEP_VARIABLES:
+        extra_dims = {v.name: v.dims for v in (*VARIABLES, *LAYER_VARIABLES)}
+        layers = any(_is_layer(d) for d in datasets.values())
+        for name in LAYER_STEP_VARIABLES if layers else STEP_VARIABLES:
             extra = extra_dims[name]
             arr = np.full((*shape, n_steps, *[len(_RECORD_COORDS[d]) for d in extra]), np.nan)
             attrs = {}

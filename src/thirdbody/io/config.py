@@ -28,6 +28,31 @@ A configuration has four tables (SI units throughout; angles in degrees)::
     resolution = 80.0               # cells per particle size
     maps_every = 5
 
+A layer of many particles (DESIGN.md §8) replaces ``[particle]`` with either a list of placed
+particles, each a ``[particle]`` table plus its centroid position ``x``, ``y`` (m)::
+
+    [[particles]]
+    shape = "sphere"
+    radius = 1.0e-3
+    E = 1.0e9
+    nu = 0.3
+    x = 0.0
+    y = 0.0
+
+or a ``[layer]`` generator table (:meth:`thirdbody.Layer.random`)::
+
+    [layer]
+    box = [10.0e-3, 10.0e-3]        # m, the rectangle the centroids are placed in
+    count = 30                      # or area_fraction = 0.3 (of the bounding discs)
+    shape = "potato"                # "sphere" | "ellipsoid" | "potato"
+    size = 1.0e-3                   # m, mean size (sphere radius, largest semi-axis)
+    size_std = 0.1e-3               # m
+    distribution = "lognormal"      # "fixed" | "normal" | "lognormal" | "list" (sizes = [...])
+    orientation = "tilted"          # "random" | "tilted" (up to max_tilt_deg) | "upright"
+    seed = 1
+    E = 1.0e9
+    nu = 0.3
+
 Unknown keys, wrong types and out-of-range values are refused with one message per problem,
 naming the key and the allowed range (:class:`ConfigError`).
 """
@@ -103,6 +128,40 @@ class Particle(_Model):
         return self
 
 
+class PlacedParticle(Particle):
+    x: float = Field(0.0, allow_inf_nan=False, description="centroid x, m")
+    y: float = Field(0.0, allow_inf_nan=False, description="centroid y, m")
+
+
+class LayerGenerator(_Model):
+    box: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)]] = Field(
+        description="m: the rectangle (L_x, L_y) of the centroids, centred on the origin")
+    count: Annotated[int | None, Field(ge=1)] = None
+    area_fraction: Annotated[float | None, Field(gt=0, le=0.5)] = None
+    shape: Literal["sphere", "ellipsoid", "potato"] = "sphere"
+    size: Annotated[float, Field(gt=0, description="m")] = 1e-3
+    size_std: Annotated[float, Field(ge=0, description="m")] = 0.0
+    distribution: Literal["fixed", "normal", "lognormal", "list"] = "fixed"
+    sizes: list[Annotated[float, Field(gt=0)]] | str | None = Field(
+        None, description="m, or a CSV file (relative to the config file)")
+    aspect: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)],
+                  Annotated[float, Field(gt=0)]] = (1.0, 0.8, 0.7)
+    amplitude: Annotated[float, Field(ge=0, le=0.5)] = 0.05
+    n_waves: Annotated[int, Field(ge=0, le=20)] = 3
+    wavenumber_range: tuple[Annotated[float, Field(ge=0)], Annotated[float, Field(ge=0)]] = (2, 4)
+    orientation: Literal["random", "tilted", "upright"] = "random"
+    max_tilt_deg: Annotated[float, Field(ge=0, le=90)] = 30.0
+    seed: Annotated[int, Field(ge=0)] = 0
+    E: Annotated[float, Field(gt=0, description="Young's modulus, Pa")]
+    nu: Annotated[float, Field(gt=-1, le=0.5, description="Poisson ratio")]
+
+    @model_validator(mode="after")
+    def _one_amount(self):
+        if (self.count is None) == (self.area_fraction is None):
+            raise ValueError("give exactly one of count and area_fraction")
+        return self
+
+
 class Plates(_Model):
     mu_up: Annotated[float, Field(ge=0, description="friction coefficient, upper plate")]
     mu_low: Annotated[float | None, Field(ge=0)] = None
@@ -148,8 +207,22 @@ class Numerics(_Model):
                                       "relative to max(mu) F_N a")] = 1e-3
 
 
+_MATERIAL_KEYS = ("E", "nu", "orientation_deg", "tilt_axis_deg", "yaw_deg", "quaternion")
+
+
+def _split(table: dict, extra: tuple[str, ...] = ()) -> dict:
+    """A [particle] table's geometry keys under ``geometry``, the rest beside them."""
+    if not isinstance(table, dict) or "geometry" in table:
+        return table
+    p = dict(table)
+    material = {k: p.pop(k) for k in (*_MATERIAL_KEYS, *extra) if k in p}
+    return {"geometry": p, **material}
+
+
 class Config(_Model):
-    particle: Particle
+    particle: Particle | None = None
+    particles: list[PlacedParticle] | None = Field(None, min_length=1)
+    layer: LayerGenerator | None = None
     plates: Plates
     load: Annotated[LinearRampLoad | HoldThenRampLoad | ForceTableLoad | GapRampLoad,
                     Field(discriminator="program")]
@@ -161,21 +234,23 @@ class Config(_Model):
     def _split_particle(cls, data):
         # the TOML's [particle] table holds both the geometry keys and the material keys
         if isinstance(data, dict) and isinstance(data.get("particle"), dict):
-            p = dict(data["particle"])
-            if "geometry" not in p:
-                material = {k: p.pop(k) for k in ("E", "nu", "orientation_deg",
-                                                  "tilt_axis_deg", "yaw_deg", "quaternion")
-                            if k in p}
-                data = {**data, "particle": {"geometry": p, **material}}
+            data = {**data, "particle": _split(data["particle"])}
+        if isinstance(data, dict) and isinstance(data.get("particles"), list):
+            data = {**data, "particles": [_split(p, ("x", "y")) for p in data["particles"]]}
         return data
 
+    @model_validator(mode="after")
+    def _one_body(self):
+        given = [k for k in ("particle", "particles", "layer") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError("give exactly one of [particle], [[particles]] and [layer]"
+                             + (f" (got {', '.join(given)})" if given else ""))
+        return self
+
     # --- building the objects ---------------------------------------------------------------
-    def build(self):
-        """(Particle, Plates, load program, Simulation keyword arguments)."""
-        import thirdbody as tb
+    def _shape(self, g):
         from thirdbody import shapes
 
-        g = self.particle.geometry
         if isinstance(g, SphereShape):
             shape = shapes.Sphere(g.radius)
         elif isinstance(g, EllipsoidShape):
@@ -189,9 +264,35 @@ class Config(_Model):
                 path = Path(self.base_dir) / path
             shape = shapes.MeshShape.from_file(path, scale=g.scale, subdivisions=g.subdivisions,
                                                max_edge=g.max_edge)
-        pc = self.particle
-        particle = tb.Particle(shape, tb.Material(pc.E, pc.nu), pc.orientation_deg,
-                               pc.tilt_axis_deg, pc.yaw_deg, pc.quaternion)
+        return shape
+
+    def _particle(self, pc):
+        import thirdbody as tb
+
+        return tb.Particle(self._shape(pc.geometry), tb.Material(pc.E, pc.nu),
+                           pc.orientation_deg, pc.tilt_axis_deg, pc.yaw_deg, pc.quaternion)
+
+    def build(self):
+        """(Particle or Layer, Plates, load program, Simulation keyword arguments)."""
+        import thirdbody as tb
+
+        if self.particle is not None:
+            body = self._particle(self.particle)
+        elif self.particles is not None:
+            body = tb.Layer([tb.PlacedParticle(self._particle(p), (p.x, p.y))
+                             for p in self.particles])
+        else:
+            lc = self.layer
+            sizes = lc.sizes
+            if isinstance(sizes, str) and not Path(sizes).is_absolute():
+                sizes = str(Path(self.base_dir) / sizes)
+            body = tb.Layer.random(
+                box=lc.box, material=tb.Material(lc.E, lc.nu), count=lc.count,
+                area_fraction=lc.area_fraction, size=lc.size, size_std=lc.size_std,
+                distribution=lc.distribution, sizes=sizes, shape=lc.shape, aspect=lc.aspect,
+                amplitude=lc.amplitude, n_waves=lc.n_waves,
+                wavenumber_range=lc.wavenumber_range, orientation=lc.orientation,
+                max_tilt_deg=lc.max_tilt_deg, seed=lc.seed)
         plates = tb.Plates(self.plates.mu_up, self.plates.mu_low)
         ld = self.load
         if isinstance(ld, LinearRampLoad):
@@ -202,15 +303,20 @@ class Config(_Model):
             load = tb.ForceTable(ld.forces)
         else:
             load = tb.GapRamp(stop=ld.stop, steps=ld.steps, start=ld.start)
-        return particle, plates, load, self.numerics.model_dump()
+        return body, plates, load, self.numerics.model_dump()
 
     def to_toml(self) -> str:
         """The resolved configuration (defaults filled in) as TOML text."""
-        data = self.model_dump(exclude={"base_dir"})
-        particle = data.pop("particle")
-        particle = {**particle.pop("geometry"), **particle}
-        data = {"particle": particle, **data}
-        return _dump_toml(data)
+        data = self.model_dump(exclude={"base_dir"}, exclude_none=True)
+        head: dict = {}
+        if "particle" in data:
+            particle = data.pop("particle")
+            head["particle"] = {**particle.pop("geometry"), **particle}
+        if "particles" in data:
+            head["particles"] = [{**p.pop("geometry"), **p} for p in data.pop("particles")]
+        if "layer" in data:
+            head["layer"] = data.pop("layer")
+        return _dump_toml({**head, **data})
 
 
 def _format_errors(exc: ValidationError, source: str) -> str:
@@ -270,9 +376,10 @@ def _dump_toml(data: dict) -> str:
 
     out = []
     for table, entries in data.items():
-        out.append(f"[{table}]")
-        for k, v in entries.items():
-            if v is not None:
-                out.append(f"{k} = {value(v)}")
-        out.append("")
+        for entry in entries if isinstance(entries, list) else [entries]:
+            out.append(f"[[{table}]]" if isinstance(entries, list) else f"[{table}]")
+            for k, v in entry.items():
+                if v is not None:
+                    out.append(f"{k} = {value(v)}")
+            out.append("")
     return "\n".join(out)

@@ -51,7 +51,7 @@ class Evaluation:
     rotation : Rotation
         The orientation (body -> world).
     force : float
-        Normal force F_N on each plate, N.
+        Normal force F_N on each plate, N (0: unloaded, :meth:`unloaded`).
     gap : float
         Plate separation h, m.
     up, low : InterfaceNormal
@@ -64,13 +64,21 @@ class Evaluation:
     rotation: Rotation
     force: float
     gap: float
-    up: InterfaceNormal
-    low: InterfaceNormal
+    up: InterfaceNormal | None
+    low: InterfaceNormal | None
     demand_force: np.ndarray
+
+    @classmethod
+    def unloaded(cls, rotation: Rotation) -> Evaluation:
+        """The particle at ``rotation`` with no load (the plates do not press it: in a layer,
+        the others hold the plates above it): no contact, no couple."""
+        return cls(rotation, 0.0, math.nan, None, None, np.zeros(2))
 
     @property
     def demand(self) -> float:
-        """|F'| / F_N: the friction coefficient the particle needs to stay put."""
+        """|F'| / F_N: the friction coefficient the particle needs to stay put (0 unloaded)."""
+        if self.force == 0:
+            return 0.0
         return float(math.hypot(*self.demand_force)) / self.force
 
     @property
@@ -88,6 +96,8 @@ class Evaluation:
     def drive(self, reference: Evaluation) -> float:
         """F'·(unit F' of ``reference``)/F_N: the couple along the turn that ``reference``
         started; it changes sign where the particle would turn back."""
+        if self.force == 0:
+            return 0.0
         return float(self.demand_force @ reference.direction) / self.force
 
 

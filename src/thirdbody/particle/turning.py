@@ -9,7 +9,10 @@ orientation that is *stable*:
 * inside the friction limit, ``|F'| <= μ_min F_N`` (it sticks there), or
 * at a *balance*: the couple along the leg changes sign (the particle would turn back), and at
   the zero crossing the couple's remaining part, across the leg, is within what the bracket
-  resolves. With μ = 0 this is the only way to stop: the orientation where F' = 0.
+  resolves. With μ = 0 this is the only way to stop: the orientation where F' = 0;
+* where it loses its load (``evaluate`` returns :meth:`Evaluation.unloaded`: in a layer, the
+  other particles hold the plates above it): the couple vanishes with the load, so it stops
+  at the last orientation where it touches (a balance, to the bisection tolerance).
 
 The search marches in legs of ``step`` (rad) and brackets every event between march points:
 
@@ -65,12 +68,15 @@ class Turn:
         Orientations evaluated (the start included).
     balanced : bool
         The turn ended at a balance of the couple rather than inside the friction limit.
+    lost_load : bool
+        It ended because the particle lost its load just beyond ``final`` (``balanced`` too).
     """
 
     final: Evaluation
     path: tuple[Evaluation, ...]
     evaluations: int
     balanced: bool
+    lost_load: bool = False
 
 
 class _Search:
@@ -78,6 +84,7 @@ class _Search:
         self.evaluate_rotation = evaluate
         self.mu_min, self.tol = mu_min, tol
         self.count = 0
+        self.lost_load = False
 
     def at(self, origin: Evaluation, t: float) -> Evaluation:
         """The orientation ``t`` (rad) along the leg that starts at ``origin``."""
@@ -85,6 +92,7 @@ class _Search:
         return self.evaluate_rotation(turned(origin.rotation, origin.axis, t))
 
     def stable(self, ev: Evaluation) -> bool:
+        """Inside the friction limit, or unloaded (no couple)."""
         return ev.demand <= self.mu_min
 
     def stops(self, ev: Evaluation, origin: Evaluation) -> bool:
@@ -106,6 +114,13 @@ class _Search:
             else:
                 lo_t, lo = t, mid
                 passed.append(mid)
+        if hi.force == 0:
+            # the particle lost its load (in a layer: the others took it) and the couple with
+            # it: it stops where it last touched, to within the tolerance
+            if passed and passed[-1] is lo:
+                passed.pop()
+            self.lost_load = True
+            return lo, passed, True
         if self.stable(hi):
             return hi, passed, False
         # reversed, not stable: the couple along the leg crosses zero in (lo, hi)
@@ -234,7 +249,7 @@ def find_stable_orientation(start: Evaluation, evaluate: Callable[..., Evaluatio
         final, passed, balanced = search.settle(origin, t_end, end)
         path.extend(passed)
         if final is not None:
-            return Turn(final, tuple(path), search.count, balanced)
+            return Turn(final, tuple(path), search.count, balanced, search.lost_load)
         a = path[-1]                # turned back at an unstable balance: on about a new axis
         marched = False
 
