@@ -703,8 +703,9 @@ def state_fractions(ds):
 
 def particle_ratios(ds):
     """F_T/(μF_N) at the interface with the smaller μ (1 is where the pair slips) of every
-    particle loaded at some step against the load step, dots coloured by the particle's state; the slip line at 1 and the stick region
-    below it are marked. The particles that came nearest to slipping are named."""
+    particle loaded at some step against the load step, dots coloured by the particle's state;
+    the slip line at 1 and the stick region below it are marked. The particles that came
+    nearest to slipping are named."""
     plt = _plt()
     from matplotlib.lines import Line2D
 

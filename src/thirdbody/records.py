@@ -337,6 +337,39 @@ def _array(var: Variable, values: list, lead: tuple[int, ...]) -> tuple[np.ndarr
     return np.array(values, dtype=dtype).reshape(shape), attrs_v
 
 
+#: what the events table records
+EVENTS = ("loaded", "unloaded", "roll_upper", "roll_lower", "rotate", "rolled_off")
+
+
+def _events(records: list[LayerRecord]) -> list[tuple[str, np.ndarray, dict]]:
+    """The events table, one row per event, in step then particle order: a particle is loaded
+    or unloaded (compared with the step before; at step 0 every loaded particle is), or turns
+    (the state in which it turned, with the angle; ``rolled_off`` if it turned until it lost
+    its load)."""
+    rows = []
+    previous = None
+    for r in records:
+        for i, p in enumerate(r.particles):
+            loaded = p.state != "unloaded"
+            was = previous[i] if previous is not None else False
+            if loaded != was:
+                rows.append((r.step, i, "loaded" if loaded else "unloaded", p.normal_force))
+            if p.turned:
+                rows.append((r.step, i, p.state if loaded else "rolled_off", p.rotation_angle))
+        previous = [p.state != "unloaded" for p in r.particles]
+    return [
+        ("event_step", np.array([row[0] for row in rows], dtype=np.int64),
+         {"long_name": "load step of the event"}),
+        ("event_particle", np.array([row[1] for row in rows], dtype=np.int64),
+         {"long_name": "particle of the event"}),
+        ("event_kind", np.array([row[2] for row in rows], dtype=str),
+         {"long_name": "one of " + ", ".join(EVENTS)}),
+        ("event_value", np.array([row[3] for row in rows], dtype=float),
+         {"units": "N or degree", "long_name": "the normal force when loaded or unloaded "
+                                                "(N); the angle turned (degree)"}),
+    ]
+
+
 def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]], layer,
                   cell_sizes: list[float], inputs: dict, status: str,
                   attrs: dict | None = None):
@@ -365,6 +398,8 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
                           {"units": "1", "long_name": "the particle's share of F_N"})
     data["load_kind"] = ("step", np.array([r.load_kind for r in records], dtype=str),
                          {"long_name": "load control: force or compression"})
+    for name, values, attrs_e in _events(records):
+        data[name] = ("event", values, attrs_e)
     pos = layer.positions
     data["x0"] = ("particle", pos[:, 0], {"units": "m", "long_name": "initial centroid x"})
     data["y0"] = ("particle", pos[:, 1], {"units": "m", "long_name": "initial centroid y"})

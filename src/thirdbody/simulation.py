@@ -32,7 +32,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import brentq
@@ -41,7 +41,7 @@ from .checkpoint import restore, snapshot
 from .layer import Layer, first_overlap
 from .loading import LoadProgram, LoadStep
 from .orientation import key
-from .particle.member import Member, ParticleState, step_maps
+from .particle.member import Compliance, Member, ParticleState, step_maps
 from .particle.model import Particle, Plates
 from .particle.statics import Evaluation, StaticsError
 from .particle.turning import find_stable_orientation, turn_kinematics
@@ -55,6 +55,9 @@ __all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationErr
 MAX_CASCADE_ROUNDS = 25
 #: a particle whose modelled share is below this fraction of F_N counts as unloaded
 MIN_SHARE = 1e-6
+#: a particle that lost its load while turning stays out of the load sharing unless the new
+#: gap presses it with more than this fraction of F_N (and more than where it stopped)
+LOST_LOAD_SHARE = 1e-3
 #: the layer's force balance is converged when no share is off by more than this fraction of
 #: F_N (each share's stiffness times the offset of its plate gap from the common one)
 SHARE_TOL = 1e-8
@@ -105,6 +108,10 @@ class Simulation:
         radius); above it the particle's twist relative to the plates is solved for (``inf``:
         never). The tilting couple's lever arms never twist (F' is parallel to the offset of the
         pressure centroids); the tractions of non-symmetric or multi-spot contacts can.
+    workers : int
+        Processes that turn the particles of a layer in parallel (the turns of one round are
+        independent: each holds the others as they were at the round's start); 1 runs
+        everything in this process. The results do not depend on it.
     """
 
     #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
@@ -114,7 +121,7 @@ class Simulation:
                  resolution: float = 80.0, cell_size: float | None = None,
                  tol: float = 1e-8, angle_step_deg: float = 1.0, angle_tol_deg: float = 0.01,
                  maps_every: int = 5, classification: str = "statics",
-                 twist_tol: float = 1e-3) -> None:
+                 twist_tol: float = 1e-3, workers: int = 1) -> None:
         from ._validate import positive, real
 
         if isinstance(particle, Layer):
@@ -152,6 +159,12 @@ class Simulation:
         self.resolution = self.layer[0].particle.shape.size / self.cell_size
         self._resolution_input = None if cell_size is not None else float(resolution)
         self.d0 = max(m.d0 for m in self.members)
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
+        self.workers = workers
+        self._settings = TurnSettings(plates, classification, self.angle_step, self.angle_tol,
+                                      self.d0, len(self.layer) > 1)
+        self._pool = None
         self.records: list = []
         self.maps: list = []
         self.status = "not run"
@@ -257,6 +270,8 @@ class Simulation:
         active = [i for i in range(n) if i not in excluded]
         for i in excluded:
             evs[i] = None
+        if not active:
+            return evs
         for _ in range(60):
             loaded = [i for i in range(n) if evs[i] is not None]
             if loaded and abs(math.fsum(evs[i].force for i in loaded) - total) <= 1e-12 * total:
@@ -355,6 +370,7 @@ class Simulation:
         counts = [1 if ev is not None else 0 for ev in evs]
         settled: dict[int, tuple] = {}
         excluded: set[int] = set()
+        stops: dict[int, float] = {}
         for _ in range(MAX_CASCADE_ROUNDS):
             # a turn that ended at a balance (or where the particle lost its load) is not
             # repeated for a change of its share alone
@@ -362,10 +378,14 @@ class Simulation:
                         and not self._stable(ev) and settled.get(i) != key(ev.rotation)]
             if not unstable:
                 break
-            for i in unstable:
-                if self._turn(i, step, state, evs, kinds, balanced, counts, settled):
-                    excluded.add(i)
-            evs = self._equilibrium(step, state, evs, frozenset(excluded))
+            starts_round = {i: state.particles[i].rotation for i in unstable}
+            lost = self._turns(unstable, step, state, evs, kinds, balanced, counts, settled)
+            for i in lost:
+                moved = (state.particles[i].rotation * starts_round[i].inv()).magnitude()
+                # it lost its load within the bisection tolerance of where it was: it is at
+                # the edge, and stays out whatever the others' new share presses on it
+                stops[i] = math.inf if moved < self.angle_tol else evs[i].force
+            evs, excluded = self._rebalance(step, state, evs, excluded | lost, stops)
         else:
             raise SimulationError(f"the layer did not settle: particles still turned after "
                                   f"{MAX_CASCADE_ROUNDS} rounds of turns and load sharing")
@@ -408,99 +428,65 @@ class Simulation:
         record.error = self._clearance(state, evs)
         return record, (maps if want_maps else None)
 
-    def _turn(self, i: int, step: LoadStep, state: LayerState, evs, kinds, balanced, counts,
-              settled) -> bool:
-        """Turn particle ``i`` to its first stable orientation at its share (force control) or
-        at the plate gap (gap control); integrate its kinematics. Returns True when it lost its
-        load on the way (a layer): it stops where it last touched and carries nothing for the
-        rest of the step (its share there vanishes with the bisection tolerance; the others take
-        it)."""
-        m, s, ev = self.members[i], state.particles[i], evs[i]
-        if kinds[i] is RigidState.STICK:
-            kinds[i] = self._classify(ev)
+    def _rebalance(self, step: LoadStep, state: LayerState, evs, candidates: set[int],
+                   stops: dict[int, float]) -> tuple[list, set[int]]:
+        """The equilibrium after a round of turns, without the particles that lost their load
+        while turning (``candidates``), as long as the others really hold the plates above
+        them: a candidate that the new gap presses harder than where it stopped (``stops``:
+        its force there, N, which vanishes with the bisection tolerance; inf for a particle
+        that lost its load within the tolerance of where it was) and with more than
+        ``LOST_LOAD_SHARE`` F_N is put back; it lost its load
+        against the others as they were at the round's start, and they may have turned too.
+        With nobody else loaded, all are put back."""
+        candidates = set(candidates)
         if step.kind == "compression":
-            h = self.d0 * (1.0 - step.value)
+            return self._equilibrium(step, state, evs, frozenset(candidates)), candidates
+        total = step.value
+        while True:
+            out = self._equilibrium(step, state, evs, frozenset(candidates))
+            loaded = [ev for ev in out if ev is not None]
+            h = self._gap(out) if loaded else None
+            wrong = {i for i in candidates
+                     if h is None or self.members[i].force_at(state.particles[i].rotation, h)
+                     > max(1.5 * stops.get(i, 0.0), LOST_LOAD_SHARE * total)}
+            if not wrong:
+                return out, candidates
+            candidates -= wrong
 
-            def evaluate(r):
-                if len(self.members) > 1 and m.reach(r) <= h:
-                    return Evaluation.unloaded(r)
-                return m.at_gap(r, h, s)
-        elif len(self.members) == 1:
-            total = ev.force
-
-            def evaluate(r):
-                return m.at_force(r, total)
+    def _turns(self, unstable: list[int], step: LoadStep, state: LayerState, evs, kinds,
+               balanced, counts, settled) -> set[int]:
+        """Turn every particle of ``unstable`` to its first stable orientation, each with the
+        others held as they were at the start of the round (so the order does not matter, and
+        the turns can run in parallel processes); integrate their kinematics. Returns the
+        particles that lost their load on the way (a layer): each stops where it last touched
+        and carries nothing for the rest of the step (its share there vanishes with the
+        bisection tolerance; the others take it)."""
+        members = self.members
+        for i in unstable:
+            if kinds[i] is RigidState.STICK:
+                kinds[i] = self._classify(evs[i])
+        snapshot = None
+        if step.kind == "force" and len(members) > 1:
+            snapshot = [m.compliance(s.rotation) for m, s in zip(members, state.particles,
+                                                                 strict=True)]
+        tasks = [(self._settings, members[i], evs[i], state.particles[i], step,
+                  None if snapshot is None else [c for j, c in enumerate(snapshot) if j != i])
+                 for i in unstable]
+        if self._pool is not None and len(tasks) > 1:
+            results = list(self._pool.map(_turn_task, tasks))
         else:
-            rotations = [p.rotation for p in state.particles]
-            guess = [ev.force]
-
-            def evaluate(r):
-                out = self._share_while_turning(i, r, step.value, rotations, guess[0])
-                if out.force > 0:
-                    guess[0] = out.force
-                return out
-        turn = find_stable_orientation(ev, evaluate, self.plates.mu_min, self.angle_step,
-                                       self.angle_tol)
-        kinematics = turn_kinematics([*turn.path, turn.final], self._classify)
-        s.position = s.position + kinematics.position
-        s.slip_up = s.slip_up + kinematics.slip_up
-        s.slip_low = s.slip_low + kinematics.slip_low
-        s.history.clear()
-        s.rotation = turn.final.rotation
-        m.restart_points(turn.final)        # the search ended elsewhere: model the final one
-        evs[i] = turn.final
-        balanced[i] = turn.balanced
-        counts[i] = turn.evaluations if counts[i] <= 1 else counts[i] + turn.evaluations
-        if turn.balanced and not turn.lost_load:
-            settled[i] = key(turn.final.rotation)       # a balance of the couple
-        return turn.lost_load and len(self.members) > 1
-
-    def _share_while_turning(self, i: int, rotation, total: float, rotations,
-                             guess: float) -> Evaluation:
-        """Particle ``i`` at ``rotation`` under force control, the others held at their
-        orientations: its share F_i with F_i + Σ_j F_j(h_i) = ``total``, the others' forces
-        from their compliance models (:meth:`Member.force_at`), by Illinois iterations on F_i
-        in [0, total] (the residual grows with F_i). Unloaded (:meth:`Evaluation.unloaded`)
-        when the others alone hold the plates above its top."""
-        m = self.members[i]
-        others = [(self.members[j], rotations[j]) for j in range(len(self.members)) if j != i]
-
-        def rest(gap: float) -> float:
-            return math.fsum(mj.force_at(rj, gap) for mj, rj in others)
-
-        reach = m.reach(rotation)
-        lo_f, lo_r = 0.0, rest(reach) - total
-        if lo_r >= 0:
-            return Evaluation.unloaded(rotation)
-        hi_f = hi_r = None
-        F = min(max(guess, 1e-3 * total), total)
-        best = None
-        side = 0
-        for _ in range(40):
-            ev = m.at_force(rotation, F)
-            r = F + rest(ev.gap) - total
-            best = ev
-            if abs(r) <= 1e-9 * total:
-                break
-            if r > 0:
-                hi_f, hi_r = F, r
-                if side == 1:
-                    lo_r *= 0.5
-                side = 1
-            else:
-                lo_f, lo_r = F, r
-                if side == -1 and hi_r is not None:
-                    hi_r *= 0.5
-                side = -1
-            if hi_f is None:
-                F = min(2.0 * F, total)
-            else:
-                F = lo_f - lo_r * (hi_f - lo_f) / (hi_r - lo_r)
-                if not lo_f < F < hi_f:
-                    F = 0.5 * (lo_f + hi_f)
-            if F <= MIN_SHARE * total:
-                return Evaluation.unloaded(rotation)
-        return best
+            results = [turn_particle(*task) for task in tasks]
+        lost = set()
+        for i, (member, particle, turn) in zip(unstable, results, strict=True):
+            members[i], state.particles[i] = member, particle
+            evs[i] = turn.final
+            balanced[i] = turn.balanced
+            counts[i] = turn.evaluations if counts[i] <= 1 else counts[i] + turn.evaluations
+            if turn.balanced and not turn.lost_load:
+                settled[i] = key(turn.final.rotation)       # a balance of the couple
+            if turn.lost_load and len(members) > 1:
+                lost.add(i)
+        return lost
 
     @staticmethod
     def _gap(evs) -> float:
@@ -534,18 +520,30 @@ class Simulation:
         (after yielding the step that brought two particles into contact).
         """
         state = state or self._initial_state()
-        for k in range(start, len(self.schedule)):
-            step = self.schedule[k]
-            try:
-                record, maps = self.step(k, state)
-            except Exception as exc:
-                reason = str(exc) or type(exc).__name__
-                raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): "
-                                      f"{reason}") from exc
-            yield record, maps, state
-            error = getattr(record, "error", None)
-            if error:
-                raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): {error}")
+        if self.workers > 1 and len(self.members) > 1:
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
+
+            method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+            self._pool = ProcessPoolExecutor(self.workers,
+                                             mp_context=multiprocessing.get_context(method))
+        try:
+            for k in range(start, len(self.schedule)):
+                step = self.schedule[k]
+                try:
+                    record, maps = self.step(k, state)
+                except Exception as exc:
+                    reason = str(exc) or type(exc).__name__
+                    raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): "
+                                          f"{reason}") from exc
+                yield record, maps, state
+                error = getattr(record, "error", None)
+                if error:
+                    raise SimulationError(f"step {k} ({step.kind} {step.value:.6g}): {error}")
+        finally:
+            if self._pool is not None:
+                self._pool.shutdown(cancel_futures=True)
+                self._pool = None
 
     def run(self, progress: Callable | None = None,
             checkpoint: Callable[[Simulation, LayerState], None] | None = None,
@@ -595,3 +593,107 @@ class Simulation:
                               self.status)
         return layer_dataset(self.records, self.maps, self.layer,
                              [m.cell_size for m in self.members], self.inputs(), self.status)
+
+
+@dataclass(frozen=True)
+class TurnSettings:
+    """What a turn needs besides the particle (picklable, for worker processes)."""
+
+    plates: Plates
+    classification: str
+    angle_step: float
+    angle_tol: float
+    d0: float
+    layer: bool
+
+    def classify(self, ev: Evaluation) -> RigidState:
+        return classify(ev.demand, self.plates.mu_up, self.plates.mu_low,
+                        classification=self.classification, mu_rtol=self.plates.mu_rtol)
+
+
+def turn_particle(settings: TurnSettings, member: Member, ev: Evaluation, particle: ParticleState,
+                  step: LoadStep, others: list[Compliance] | None):
+    """Turn one particle from ``ev`` to its first stable orientation (or until it loses its
+    load) and integrate its kinematics: at its share under force control (``others``: the
+    other particles' compliance, held; None for a particle alone), at the plate gap under gap
+    control. Updates and returns (member, particle state, :class:`Turn`)."""
+    m, s = member, particle
+    if step.kind == "compression":
+        h = settings.d0 * (1.0 - step.value)
+
+        def evaluate(r):
+            if settings.layer and m.reach(r) <= h:
+                return Evaluation.unloaded(r)
+            return m.at_gap(r, h, s)
+    elif others is None:
+        total = ev.force
+
+        def evaluate(r):
+            return m.at_force(r, total)
+    else:
+        guess = [ev.force]
+
+        def evaluate(r):
+            out = _share_while_turning(m, r, step.value, others, guess[0])
+            if out.force > 0:
+                guess[0] = out.force
+            return out
+    turn = find_stable_orientation(ev, evaluate, settings.plates.mu_min, settings.angle_step,
+                                   settings.angle_tol)
+    kinematics = turn_kinematics([*turn.path, turn.final], settings.classify)
+    s.position = s.position + kinematics.position
+    s.slip_up = s.slip_up + kinematics.slip_up
+    s.slip_low = s.slip_low + kinematics.slip_low
+    s.history.clear()
+    s.rotation = turn.final.rotation
+    m.restart_points(turn.final)        # the search ended elsewhere: model the final one
+    return m, s, replace(turn, path=())     # the path is integrated: do not ship it back
+
+
+def _turn_task(task: tuple):
+    return turn_particle(*task)
+
+
+def _share_while_turning(m: Member, rotation, total: float, others: list[Compliance],
+                         guess: float) -> Evaluation:
+    """A particle at ``rotation`` under force control, the others held: its share F_i with
+    F_i + Σ_j F_j(h_i) = ``total``, the others' forces from their compliance models, by
+    Illinois iterations on F_i in [0, total] (the residual grows with F_i). Unloaded
+    (:meth:`Evaluation.unloaded`) when the others alone hold the plates above its top."""
+
+    def rest(gap: float) -> float:
+        return math.fsum(c.force_at(gap) for c in others)
+
+    reach = m.reach(rotation)
+    lo_f, lo_r = 0.0, rest(reach) - total
+    if lo_r >= 0:
+        return Evaluation.unloaded(rotation)
+    hi_f = hi_r = None
+    F = min(max(guess, 1e-3 * total), total)
+    best = None
+    side = 0
+    for _ in range(40):
+        ev = m.at_force(rotation, F)
+        r = F + rest(ev.gap) - total
+        best = ev
+        if abs(r) <= 1e-9 * total:
+            break
+        if r > 0:
+            hi_f, hi_r = F, r
+            if side == 1:
+                lo_r *= 0.5
+            side = 1
+        else:
+            lo_f, lo_r = F, r
+            if side == -1 and hi_r is not None:
+                hi_r *= 0.5
+            side = -1
+        if hi_f is None:
+            F = min(2.0 * F, total)
+        else:
+            F = lo_f - lo_r * (hi_f - lo_f) / (hi_r - lo_r)
+            if not lo_f < F < hi_f:
+                F = 0.5 * (lo_f + hi_f)
+        if F <= MIN_SHARE * total:
+            return Evaluation.unloaded(rotation)
+    return best

@@ -205,6 +205,8 @@ class Numerics(_Model):
     classification: Literal["statics", "paper"] = "statics"
     twist_tol: Annotated[float, Field(ge=0, description="twisting moment left unbalanced, "
                                       "relative to max(mu) F_N a")] = 1e-3
+    workers: Annotated[int, Field(ge=1, le=256, description="processes turning the particles "
+                                  "of a layer in parallel")] = 1
 
 
 _MATERIAL_KEYS = ("E", "nu", "orientation_deg", "tilt_axis_deg", "yaw_deg", "quaternion")

@@ -23,7 +23,7 @@ from .model import Particle, Plates
 from .statics import Evaluation, PairStatics
 from .surface import LOWER, UPPER
 
-__all__ = ["Member", "ParticleState", "step_maps"]
+__all__ = ["Compliance", "Member", "ParticleState", "step_maps"]
 
 
 @dataclass
@@ -41,6 +41,41 @@ class ParticleState:
     slip_low: np.ndarray = field(default_factory=lambda: np.zeros(2))
     history: dict[str, tuple[Window, TangentialContact]] = field(default_factory=dict)
     force_guess: float | None = None
+
+
+@dataclass(frozen=True)
+class Compliance:
+    """A particle's normal force against the plate gap at one orientation, modelled from its
+    last solves there: ``points`` (force N, plate gap m, total approach m), ``reach`` the plate
+    gap at first contact (m, from the scan), the material's E* (Pa) and the shape's size (m)."""
+
+    points: tuple[tuple[float, float, float], ...]
+    reach: float
+    E_star: float
+    size: float
+
+    def force_at(self, gap: float) -> float:
+        """The normal force (N) at plate gap ``gap`` (m): F^(2/3) linear in the gap (Hertz),
+        through the last two solves when their forces differ by more than 0.1 % (a secant);
+        otherwise through the last solve with the Hertz stiffness of its approach,
+        F ∝ (δ + h₁ − h)^(3/2), δ the total approach measured from the lowest surface cells (a
+        Newton step, free of the solver's noise); with no solve, Hertz for a radius ``size``
+        from the scanned height."""
+        pts = self.points
+        if len(pts) == 2 and abs(pts[0][0] - pts[1][0]) > 1e-3 * pts[1][0] \
+                and pts[0][1] != pts[1][1]:
+            (F0, h0, _), (F1, h1, _) = pts
+            slope = (F1 ** (2 / 3) - F0 ** (2 / 3)) / (h1 - h0)
+            if slope < 0:
+                value = F1 ** (2 / 3) + slope * (gap - h1)
+                return value**1.5 if value > 0 else 0.0
+        if pts and pts[-1][2] > 0 and pts[-1][0] > 0:
+            F1, h1, d1 = pts[-1]
+            value = (d1 + h1 - gap) / d1
+            return F1 * value**1.5 if value > 0 else 0.0
+        delta = self.reach - gap
+        return (4.0 / 3.0 * self.E_star * math.sqrt(self.size) * (delta / 2) ** 1.5
+                if delta > 0 else 0.0)
 
 
 class Member:
@@ -102,28 +137,17 @@ class Member:
         state.force_guess = ev.force
         return ev
 
-    def force_at(self, rotation: Rotation, gap: float) -> float:
-        """A model of the normal force (N) at plate gap ``gap`` (m), from the solves at
-        ``rotation``: F^(2/3) linear in the gap (Hertz), through the last two solves when their
-        forces differ by more than 0.1 % (a secant); otherwise through the last solve with the
-        Hertz stiffness of its approach, F ∝ (δ + h₁ − h)^(3/2), δ the total approach measured
-        from the lowest surface cells (a Newton step, free of the solver's noise); with no
-        solve, Hertz for a radius ``shape.size`` from the scanned height."""
+    def compliance(self, rotation: Rotation) -> Compliance:
+        """The model of this particle's normal force against the plate gap at ``rotation``
+        (a plain, picklable snapshot)."""
         pts = self.points if key(rotation) == self._points_key else []
-        if len(pts) == 2 and abs(pts[0][0] - pts[1][0]) > 1e-3 * pts[1][0] \
-                and pts[0][1] != pts[1][1]:
-            (F0, h0, _), (F1, h1, _) = pts
-            slope = (F1 ** (2 / 3) - F0 ** (2 / 3)) / (h1 - h0)
-            if slope < 0:
-                value = F1 ** (2 / 3) + slope * (gap - h1)
-                return value**1.5 if value > 0 else 0.0
-        if pts and pts[-1][2] > 0 and pts[-1][0] > 0:
-            F1, h1, d1 = pts[-1]
-            value = (d1 + h1 - gap) / d1
-            return F1 * value**1.5 if value > 0 else 0.0
-        E, R = self.particle.material.E_star, self.particle.shape.size
-        delta = self.reach(rotation) - gap
-        return 4.0 / 3.0 * E * math.sqrt(R) * (delta / 2) ** 1.5 if delta > 0 else 0.0
+        return Compliance(tuple(pts), self.reach(rotation), self.particle.material.E_star,
+                          self.particle.shape.size)
+
+    def force_at(self, rotation: Rotation, gap: float) -> float:
+        """The modelled normal force (N) at plate gap ``gap`` (m): :meth:`Compliance.force_at`
+        of :meth:`compliance`."""
+        return self.compliance(rotation).force_at(gap)
 
     # --- tangential ----------------------------------------------------------------------------
     def tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
