@@ -116,8 +116,25 @@ COORDS = {"interface": list(INTERFACES), "component": list(COMPONENTS),
            "quaternion_component": ["x", "y", "z", "w"]}
 
 
+class _Values:
+    """Attribute access to ``values``: ``record.plate_gap`` reads ``record.values["plate_gap"]``
+    (and pickling that does not recurse through it)."""
+
+    def __getattr__(self, name: str) -> Any:
+        values = self.__dict__.get("values")
+        if values is not None and name in values:
+            return values[name]
+        raise AttributeError(name)
+
+    def __getstate__(self) -> dict:
+        return self.__dict__
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
+
 @dataclass
-class StepRecord:
+class StepRecord(_Values):
     """The per-step variables of :data:`VARIABLES` for one completed step.
 
     ``values`` maps each name to a number or, for variables with dimensions, a tuple (interface
@@ -135,17 +152,6 @@ class StepRecord:
             raise ValueError(f"record fields do not match the table: missing {sorted(missing)}, "
                              f"unknown {sorted(extra)}")
 
-    def __getattr__(self, name: str) -> Any:
-        values = self.__dict__.get("values")
-        if values is not None and name in values:
-            return values[name]
-        raise AttributeError(name)
-
-    def __getstate__(self) -> dict:
-        return self.__dict__
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
 
 
 def orientation_label(record: StepRecord) -> str:
@@ -274,7 +280,7 @@ _LAYER_ONLY = {"load_value", "plate_gap", "compression", "time_total"}
 
 
 @dataclass
-class LayerRecord:
+class LayerRecord(_Values):
     """One completed step of a layer: the per-particle :class:`StepRecord` objects (layer
     order) and the layer's variables (:data:`LAYER_VARIABLES`). ``error`` is set when the step
     ended with two particles touching."""
@@ -285,17 +291,6 @@ class LayerRecord:
     values: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
 
-    def __getattr__(self, name: str) -> Any:
-        values = self.__dict__.get("values")
-        if values is not None and name in values:
-            return values[name]
-        raise AttributeError(name)
-
-    def __getstate__(self) -> dict:
-        return self.__dict__
-
-    def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
 
     @classmethod
     def from_particles(cls, k: int, step, gap: float, d0: float, records: list[StepRecord],
