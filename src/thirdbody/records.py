@@ -387,7 +387,7 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
         arr, a = _array(var, values, (len(records), n))
         data[var.name] = (("step", "particle", *var.dims), arr, a)
     F = np.array([[p.normal_force for p in r.particles] for r in records]).reshape(-1, n)
-    totals = F.sum(axis=1, keepdims=True)
+    totals = np.array([[r.values["total_force"]] for r in records]).reshape(-1, 1)
     data["load_share"] = (("step", "particle"),
                           np.divide(F, totals, out=np.zeros_like(F), where=totals > 0),
                           {"units": "1", "long_name": "the particle's share of F_N"})
