@@ -60,7 +60,7 @@ MIN_SHARE = 1e-6
 LOST_LOAD_SHARE = 1e-3
 #: the layer's force balance is converged when no share is off by more than this fraction of
 #: F_N (each share's stiffness times the offset of its plate gap from the common one)
-SHARE_TOL = 1e-8
+SHARE_TOL = 1e-7
 
 
 class SimulationError(RuntimeError):
