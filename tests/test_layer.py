@@ -138,6 +138,7 @@ def test_every_step_balances_the_load_and_each_particle():
     F = ds.normal_force.values
     np.testing.assert_allclose(F.sum(axis=1), ds.load_value.values, rtol=1e-12)
     np.testing.assert_allclose(ds.total_force.values, ds.load_value.values, rtol=1e-12)
+    assert np.all(ds.share_error.values <= 1e-7)
     loaded = ds.state.values != tb.simulation.STATES.index("unloaded")
     assert np.array_equal(loaded.sum(axis=1), ds.loaded.values)
     assert np.all(F[~loaded] == 0) and np.all(F[loaded] > 0)
@@ -534,3 +535,62 @@ def test_several_particles_turning_in_one_round_do_not_depend_on_their_order():
             continue
         other = back[name] if "particle" in var.dims else b[name]
         assert np.array_equal(var.values, other.values, equal_nan=var.dtype.kind == "f"), name
+
+
+def test_the_share_of_a_turning_particle_balances_the_others_compliance():
+    """_share_while_turning against arithmetic done here: the others are Hertz springs
+    (compliances without solves: F = (4/3) E* √R ((reach − h)/2)^{3/2}); the particle's share
+    F_i must satisfy F_i + Σ F_j(h_i) = F_N to 1e-9, h_i being the gap of its own solve; with
+    the others alone holding the plates above its top it is unloaded."""
+    from thirdbody.particle.member import Compliance, Member
+    from thirdbody.simulation import _share_while_turning
+
+    R = 1e-3
+    member = Member(tb.Particle(Sphere(R), SOFT), tb.Plates(0.3), R / 60, 1e-8, 1e-3)
+    rotation = tb.orientation.tilt(0.0)
+    reach = member.reach(rotation)
+    total = 5.0
+
+    def spring(top):
+        return Compliance((), top, SOFT.E_star, 0.9e-3)
+
+    def hertz(top, h):
+        return 4 / 3 * SOFT.E_star * math.sqrt(0.9e-3) * max((top - h) / 2, 0) ** 1.5
+
+    for tops, guess in (((reach - 2e-6, reach + 1e-6), 1.0), ((reach - 5e-6,), 4.9),
+                        ((reach + 3e-6, reach - 1e-6, reach), 0.01)):
+        ev = _share_while_turning(member, rotation, total, [spring(t) for t in tops], guess)
+        assert ev.force > 0
+        rest = sum(hertz(t, ev.gap) for t in tops)
+        assert abs(ev.force + rest - total) <= 1e-9 * total, (tops, ev.force, rest)
+    # the others alone carry F_N with the plates above this particle's top: unloaded
+    high = reach + 1e-3
+    ev = _share_while_turning(member, rotation, total, [spring(high)], 1.0)
+    assert ev.force == 0 and ev.rotation is rotation
+
+
+def test_a_layer_under_gap_control_turns_each_particle_at_the_prescribed_gap():
+    """A tilted ellipsoid (μ = 0.46 just below ξ(20°) = 0.473: a small turn) with a shorter
+    sphere far away, under gap control: the sphere never touches, and the ellipsoid turns
+    exactly as it does alone at the same gaps (the compression is relative to the tallest
+    particle, the ellipsoid in both runs)."""
+    a, b, c = 1e-3, 0.8e-3, 0.6e-3
+    alone = tb.Particle(Ellipsoid((a, b, c)), SOFT, 20.0)
+    load = tb.GapRamp(stop=0.03, steps=2)
+    single = quiet_run(tb.Simulation(alone, tb.Plates(0.46), load, resolution=80,
+                                     maps_every=0))
+    layer = tb.Layer([tb.PlacedParticle(alone, (0.0, 0.0)),
+                      tb.PlacedParticle(tb.Particle(Sphere(0.5e-3), SOFT), (5e-3, 0.0))])
+    sim = tb.Simulation(layer, tb.Plates(0.46), load, resolution=80, maps_every=0)
+    ds = quiet_run(sim)
+    assert sim.status == "complete"
+    assert int(ds.turned[0, 0]) == 1 and not ds.normal_force.values[:, 1].any()
+    for name in ("normal_force", "orientation", "ratio", "position", "contact_area"):
+        np.testing.assert_array_equal(ds[name].isel(particle=0).values, single[name].values,
+                                      err_msg=name)
+    np.testing.assert_array_equal(ds.plate_gap.values, single.plate_gap.values)
+    # the gap is the prescribed one, from the ellipse's height done here
+    t = math.radians(20.0)
+    d0 = 2 * math.sqrt(a**2 * math.sin(t) ** 2 + c**2 * math.cos(t) ** 2)
+    np.testing.assert_allclose(ds.plate_gap.values, d0 * (1 - ds.load_value.values),
+                               rtol=1e-7)

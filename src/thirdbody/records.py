@@ -273,6 +273,8 @@ LAYER_VARIABLES: tuple[Variable, ...] = (
     _v("plate_moment", "component", "N m",
        "tilting moment of the particles' forces on the upper plate, about the origin on the "
        "lower plate"),
+    _v("share_error", "", "1", "largest error of a particle's share of F_N accepted by the "
+                               "load sharing in the step (converged: <= 1e-7)"),
     _v("time_total", "", "s", "wall time of the step"),
 )
 #: record variables that belong to the layer, not to a particle
@@ -294,7 +296,7 @@ class LayerRecord(_Values):
 
     @classmethod
     def from_particles(cls, k: int, step, gap: float, d0: float, records: list[StepRecord],
-                       layer, evs, time_total: float) -> LayerRecord:
+                       layer, evs, time_total: float, share_error: float = 0.0) -> LayerRecord:
         total = math.fsum(r.normal_force for r in records)
         loaded = [r for r in records if r.state != "unloaded"]
         n = max(len(loaded), 1)
@@ -315,7 +317,8 @@ class LayerRecord(_Values):
             fraction_roll=sum(r.state in ("roll_upper", "roll_lower") for r in loaded) / n,
             fraction_rotate=sum(r.state == "rotate" for r in loaded) / n,
             plate_force=tuple(float(v) for v in force),
-            plate_moment=tuple(float(v) for v in moment), time_total=time_total)
+            plate_moment=tuple(float(v) for v in moment), share_error=share_error,
+            time_total=time_total)
         return cls(k, step.kind, records, values)
 
 

@@ -61,6 +61,9 @@ LOST_LOAD_SHARE = 1e-3
 #: the layer's force balance is converged when no share is off by more than this fraction of
 #: F_N (each share's stiffness times the offset of its plate gap from the common one)
 SHARE_TOL = 1e-7
+#: ... and accepted after 60 iterations if it stalled (at the normal solver's noise) below this;
+#: the step records the largest share error it accepted (``share_error``)
+SHARE_TOL_STALLED = 1e-5
 
 
 class SimulationError(RuntimeError):
@@ -165,6 +168,7 @@ class Simulation:
         self._settings = TurnSettings(plates, classification, self.angle_step, self.angle_tol,
                                       self.d0, len(self.layer) > 1)
         self._pool = None
+        self._share_error = 0.0
         self.records: list = []
         self.maps: list = []
         self.status = "not run"
@@ -272,17 +276,22 @@ class Simulation:
             evs[i] = None
         if not active:
             return evs
+        best: tuple[float, list] | None = None
         for _ in range(60):
             loaded = [i for i in range(n) if evs[i] is not None]
             if loaded and abs(math.fsum(evs[i].force for i in loaded) - total) <= 1e-12 * total:
                 h = math.fsum(evs[i].force * evs[i].gap for i in loaded) / total
                 # each share's error: its stiffness (Hertz, 1.5 F/δ) times its gap's offset
-                if all(1.5 * evs[i].force * abs(evs[i].gap - h)
-                       <= SHARE_TOL * total * max(members[i].points[-1][2], 0.0)
-                       for i in loaded) and \
-                        all(members[j].force_at(rotations[j], h) < 10 * MIN_SHARE * total
-                            for j in active if evs[j] is None):
-                    return evs
+                error = max(1.5 * evs[i].force * abs(evs[i].gap - h)
+                            / (total * members[i].points[-1][2])
+                            if members[i].points[-1][2] > 0 else math.inf for i in loaded)
+                if all(members[j].force_at(rotations[j], h) < 10 * MIN_SHARE * total
+                       for j in active if evs[j] is None):
+                    if error <= SHARE_TOL:
+                        self._share_error = max(self._share_error, error)
+                        return evs
+                    if best is None or error < best[0]:
+                        best = (error, list(evs))
 
             def excess(gap: float) -> float:
                 return math.fsum(members[i].force_at(rotations[i], gap) for i in active) - total
@@ -301,7 +310,12 @@ class Simulation:
             for i in range(n):
                 evs[i] = (members[i].at_force(rotations[i], float(forces[i]))
                           if forces[i] > 0 else None)
-        raise StaticsError("the plate gap for the normal force did not settle in 60 iterations")
+        if best is not None and best[0] <= SHARE_TOL_STALLED:
+            # stalled at the solvers' noise: accept, and record how far the shares are off
+            self._share_error = max(self._share_error, best[0])
+            return best[1]
+        raise StaticsError("the plate gap for the normal force did not settle in 60 iterations"
+                           + (f" (shares off by {best[0]:.2g} F_N)" if best else ""))
 
     def preflight(self) -> int:
         """Solve the largest load at the initial orientations once and check the resolution.
@@ -361,6 +375,7 @@ class Simulation:
         step = self.schedule[k]
         n = len(self.members)
         t_start = time.perf_counter()
+        self._share_error = 0.0
         clock0 = [(m.statics.normal_time, m.statics.geometry_time) for m in self.members]
         starts = [s.rotation for s in state.particles]
         evs = self._equilibrium(step, state, None)
@@ -424,7 +439,7 @@ class Simulation:
         for r in records:
             r.values["time_total"] = math.nan
         record = LayerRecord.from_particles(k, step, gap, self.d0, records, self.layer, evs,
-                                            total)
+                                            total, self._share_error)
         record.error = self._clearance(state, evs)
         return record, (maps if want_maps else None)
 
@@ -622,7 +637,7 @@ def turn_particle(settings: TurnSettings, member: Member, ev: Evaluation, partic
         h = settings.d0 * (1.0 - step.value)
 
         def evaluate(r):
-            if settings.layer and m.reach(r) <= h:
+            if m.reach(r) <= h:             # turned off the plates: it stops where it touched
                 return Evaluation.unloaded(r)
             return m.at_gap(r, h, s)
     elif others is None:
