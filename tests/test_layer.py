@@ -594,3 +594,20 @@ def test_a_layer_under_gap_control_turns_each_particle_at_the_prescribed_gap():
     d0 = 2 * math.sqrt(a**2 * math.sin(t) ** 2 + c**2 * math.cos(t) ** 2)
     np.testing.assert_allclose(ds.plate_gap.values, d0 * (1 - ds.load_value.values),
                                rtol=1e-7)
+
+
+def test_sizes_from_a_csv_file(tmp_path):
+    """One size per row (m), first column, an optional header; a bad row is refused with its
+    number."""
+    path = tmp_path / "sizes.csv"
+    path.write_text("size_m,comment\n1.0e-3,big\n0.5e-3,small\n")
+    layer = tb.Layer.random(box=(20e-3, 20e-3), material=SOFT, count=3, distribution="list",
+                            sizes=path, seed=1)
+    assert [p.particle.shape.size for p in layer] == [1e-3, 0.5e-3, 1e-3]
+    path.write_text("1.0e-3\nbig\n")
+    with pytest.raises(LayerError, match="row 2"):
+        tb.Layer.random(box=(20e-3, 20e-3), material=SOFT, count=3, distribution="list",
+                        sizes=path, seed=1)
+    with pytest.raises(LayerError, match="cannot read"):
+        tb.Layer.random(box=(20e-3, 20e-3), material=SOFT, count=3, distribution="list",
+                        sizes=tmp_path / "missing.csv", seed=1)
