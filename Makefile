@@ -76,13 +76,9 @@ bench-simulation: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/simulation_fig3.py
 
 bench-layer: $(VENV)/.installed-test
-	$(BIN)/thirdbody run src/thirdbody/examples/layer_polydisperse.toml -o $(OUT)/layer
-	$(BIN)/thirdbody export-vtk $(OUT)/layer/results.nc $(OUT)/layer/vtk
+	$(BIN)/python benchmarks/layer.py --md benchmarks/results/layer.md
 
-layer-hertz: $(VENV)/.installed-test
-	$(BIN)/python examples/layer_hertz_check.py --out $(OUT)/layer_hertz
-
-sweep: $(VENV)/.installed-test
+bench-sweep: $(VENV)/.installed-test
 	$(BIN)/python benchmarks/sweep_throughput.py --md benchmarks/results/sweep_throughput.md
 
 # mutation testing of the particle physics ([tool.mutmut] in pyproject.toml); hours on 2 cores
