@@ -457,16 +457,13 @@ def _layer_title(ds) -> str:
 def _layer_from_config(ds):
     """The :class:`thirdbody.Layer` rebuilt from the run's ``config`` attribute (TOML), or None
     when there is none, it cannot be built, or it does not match the results."""
-    text = ds.attrs.get("config")
-    if not text:
+    if not ds.attrs.get("config"):
         return None
     try:
-        import tomllib
-
         import thirdbody
-        from thirdbody.io.config import parse_config
+        from thirdbody.io.config import body_from_results
 
-        body = parse_config(tomllib.loads(text)).build()[0]
+        body = body_from_results(ds)
         if isinstance(body, thirdbody.Layer) and len(body) == ds.sizes["particle"]:
             return body
     except Exception:       # a config this version cannot build: draw circles instead

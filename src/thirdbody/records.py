@@ -296,7 +296,9 @@ class LayerRecord(_Values):
 
     @classmethod
     def from_particles(cls, k: int, step, gap: float, d0: float, records: list[StepRecord],
-                       layer, evs, time_total: float, share_error: float = 0.0) -> LayerRecord:
+                       layer, time_total: float, share_error: float = 0.0) -> LayerRecord:
+        """The layer's variables from its particles' records (``gap``, ``d0``: m; the wall
+        time of the step, s; the largest share error accepted by the load sharing)."""
         total = math.fsum(r.normal_force for r in records)
         loaded = [r for r in records if r.state != "unloaded"]
         n = max(len(loaded), 1)

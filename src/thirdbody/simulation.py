@@ -32,7 +32,7 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 from scipy.optimize import brentq
@@ -72,11 +72,9 @@ class SimulationError(RuntimeError):
 
 @dataclass
 class LayerState:
-    """Every particle's :class:`ParticleState` (layer order) and the last plate gap h (m)."""
+    """Every particle's :class:`ParticleState`, in layer order."""
 
     particles: list[ParticleState]
-    gap: float | None = None
-    shares: list[float] = field(default_factory=list)
 
 
 class Simulation:
@@ -160,13 +158,12 @@ class Simulation:
                         for p, c in zip(self.layer, cells, strict=True)]
         self.cell_size = cells[0]
         self.resolution = self.layer[0].particle.shape.size / self.cell_size
-        self._resolution_input = None if cell_size is not None else float(resolution)
         self.d0 = max(m.d0 for m in self.members)
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
         self.workers = workers
         self._settings = TurnSettings(plates, classification, self.angle_step, self.angle_tol,
-                                      self.d0, len(self.layer) > 1)
+                                      self.d0)
         self._pool = None
         self._share_error = 0.0
         self.records: list = []
@@ -222,8 +219,7 @@ class Simulation:
         return ev.demand <= self.plates.mu_min
 
     def _classify(self, ev: Evaluation) -> RigidState:
-        return classify(ev.demand, self.plates.mu_up, self.plates.mu_low,
-                        classification=self.classification, mu_rtol=self.plates.mu_rtol)
+        return self._settings.classify(ev)
 
     def _equilibrium(self, step: LoadStep, state: LayerState,
                      evs: list[Evaluation | None] | None,
@@ -278,6 +274,8 @@ class Simulation:
             return evs
         best: tuple[float, list] | None = None
         for _ in range(60):
+            # each particle's compliance, once per iteration (Brent evaluates it many times)
+            models = {i: members[i].compliance(rotations[i]) for i in active}
             loaded = [i for i in range(n) if evs[i] is not None]
             if loaded and abs(math.fsum(evs[i].force for i in loaded) - total) <= 1e-12 * total:
                 h = math.fsum(evs[i].force * evs[i].gap for i in loaded) / total
@@ -285,7 +283,7 @@ class Simulation:
                 error = max(1.5 * evs[i].force * abs(evs[i].gap - h)
                             / (total * members[i].points[-1][2])
                             if members[i].points[-1][2] > 0 else math.inf for i in loaded)
-                if all(members[j].force_at(rotations[j], h) < 10 * MIN_SHARE * total
+                if all(models[j].force_at(h) < 10 * MIN_SHARE * total
                        for j in active if evs[j] is None):
                     if error <= SHARE_TOL:
                         self._share_error = max(self._share_error, error)
@@ -293,8 +291,8 @@ class Simulation:
                     if best is None or error < best[0]:
                         best = (error, list(evs))
 
-            def excess(gap: float) -> float:
-                return math.fsum(members[i].force_at(rotations[i], gap) for i in active) - total
+            def excess(gap: float, models=models) -> float:
+                return math.fsum(models[i].force_at(gap) for i in active) - total
 
             top = float(reach[active].max())
             depth = 1e-3 * top
@@ -303,7 +301,7 @@ class Simulation:
                 if depth > top:
                     raise StaticsError("the plate gap for the normal force could not be found")
             h = brentq(excess, top - depth, top, xtol=1e-15 * top, rtol=1e-15)
-            forces = np.array([members[i].force_at(rotations[i], h) if i in active else 0.0
+            forces = np.array([models[i].force_at(h) if i in active else 0.0
                                for i in range(n)])
             forces[forces < MIN_SHARE * total] = 0.0
             forces *= total / math.fsum(forces)
@@ -436,10 +434,8 @@ class Simulation:
         if self.single:
             records[0].values["time_total"] = total
             return records[0], maps[0] if want_maps else None
-        for r in records:
-            r.values["time_total"] = math.nan
-        record = LayerRecord.from_particles(k, step, gap, self.d0, records, self.layer, evs,
-                                            total, self._share_error)
+        record = LayerRecord.from_particles(k, step, gap, self.d0, records, self.layer, total,
+                                            self._share_error)
         record.error = self._clearance(state, evs)
         return record, (maps if want_maps else None)
 
@@ -619,7 +615,6 @@ class TurnSettings:
     angle_step: float
     angle_tol: float
     d0: float
-    layer: bool
 
     def classify(self, ev: Evaluation) -> RigidState:
         return classify(ev.demand, self.plates.mu_up, self.plates.mu_low,

@@ -65,7 +65,7 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-__all__ = ["Config", "ConfigError", "load_config"]
+__all__ = ["Config", "ConfigError", "body_from_results", "load_config"]
 
 
 class ConfigError(ValueError):
@@ -364,6 +364,22 @@ def parse_config(data: dict, source: str = "<dict>", base_dir: str = ".") -> Con
     except (ValueError, OSError) as exc:       # checks only the objects can make
         raise ConfigError(f"invalid configuration {source}: {exc}") from None
     return cfg
+
+
+def body_from_results(ds, source: str = "the results"):
+    """The Particle or Layer of a run, rebuilt from its results' ``config`` attribute (the
+    TOML that ``thirdbody run`` and sweeps store). Raises :class:`ConfigError` when there is
+    none or it cannot be built."""
+    text = ds.attrs.get("config")
+    if not isinstance(text, str) or not text.strip():
+        raise ConfigError(f"{source} has no 'config' attribute (the run's configuration), so "
+                          "its particles cannot be rebuilt")
+    where = f"{source} (config attribute)"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"invalid configuration in {where}: {exc}") from None
+    return parse_config(data, source=where).build()[0]
 
 
 def _dump_toml(data: dict) -> str:

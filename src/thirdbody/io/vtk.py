@@ -413,9 +413,7 @@ def export_vtk_cli(results: Path, out: Path) -> int:
     int
         Exit code: 0 written, 2 bad input, 1 the files could not be written.
     """
-    import tomllib
-
-    from thirdbody.io.config import ConfigError, parse_config
+    from thirdbody.io.config import ConfigError, body_from_results
     from thirdbody.io.results import open_results
     from thirdbody.particle import Particle
 
@@ -434,15 +432,8 @@ def export_vtk_cli(results: Path, out: Path) -> int:
     if "step" not in ds.dims or "quaternion" not in ds.variables:
         return fail(f"{results} is not a thirdbody results file (no 'step' dimension or "
                     "'quaternion' variable)")
-    text = ds.attrs.get("config")
-    if not isinstance(text, str) or not text.strip():
-        return fail(f"{results} has no 'config' attribute (the run's configuration), so its "
-                    "particles cannot be rebuilt")
-    source = f"{results} (config attribute)"
     try:
-        body = parse_config(tomllib.loads(text), source=source).build()[0]
-    except tomllib.TOMLDecodeError as exc:
-        return fail(f"invalid configuration in {source}: {exc}")
+        body = body_from_results(ds, str(results))
     except ConfigError as exc:
         return fail(str(exc))
     layer = Layer.of(body) if isinstance(body, Particle) else body
