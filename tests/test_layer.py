@@ -611,3 +611,56 @@ def test_sizes_from_a_csv_file(tmp_path):
     with pytest.raises(LayerError, match="cannot read"):
         tb.Layer.random(box=(20e-3, 20e-3), material=SOFT, count=3, distribution="list",
                         sizes=tmp_path / "missing.csv", seed=1)
+
+
+def test_the_plate_reactions_are_the_moments_of_the_particles_forces():
+    """plate_force and plate_moment, against arithmetic done here. Four identical spheres at
+    known places carry F_N/4 each with no tangential force: the moment about the origin of their
+    pushes on the upper plate is (F/4) Σ (y_i, −x_i). A tilted ellipsoid adds its couple: the
+    tangential force F' at height h and its normal force at its upper pressure centroid."""
+    R, total = 1e-3, 8.0
+    places = ((1e-3, 0.0), (5e-3, 2e-3), (-2e-3, 5e-3), (-3e-3, -4e-3))
+    layer = tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(R), SOFT), xy) for xy in places])
+    ds = quiet_run(tb.Simulation(layer, tb.Plates(0.3), tb.ForceTable([total]), resolution=40,
+                                 maps_every=0))
+    expected = total / 4 * np.array([sum(y for _, y in places), -sum(x for x, _ in places)])
+    np.testing.assert_allclose(ds.plate_moment.values[0], expected, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(ds.plate_force.values[0], 0.0, atol=1e-9 * total)
+
+    tilted = tb.Layer([tb.PlacedParticle(tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), SOFT,
+                                                     20.0, 60.0), (2e-3, -1e-3))])
+    ds = quiet_run(tb.Simulation(tilted, tb.Plates(0.6), tb.ForceTable([1.0]), resolution=60,
+                                 maps_every=0))
+    F = float(ds.normal_force[0, 0])
+    fx, fy = ds.tangential_force.values[0, 0]
+    cx, cy = ds.centroid.sel(interface="upper").values[0, 0]
+    h = float(ds.plate_gap[0])
+    assert math.hypot(fx, fy) > 0.05 * F                    # a real couple
+    x, y = 2e-3 + float(ds.position[0, 0, 0]) + cx, -1e-3 + float(ds.position[0, 0, 1]) + cy
+    # r × f with r = (x, y, h) and f = (F'_x, F'_y, F): the particle on the upper plate
+    np.testing.assert_allclose(ds.plate_moment.values[0], (y * F - h * fy, h * fx - x * F),
+                               rtol=1e-12)
+    np.testing.assert_allclose(ds.plate_force.values[0], (fx, fy), rtol=1e-12)
+
+
+def test_a_sphere_that_would_carry_less_than_a_millionth_is_unloaded_and_the_rest_adds_up():
+    """Two spheres carry F_N; a third one reaches just past the gap they hold, where Hertz
+    gives it 1e-8 F_N: below MIN_SHARE, so it is dropped, and the other two still add up to
+    F_N exactly (their shares are rescaled) and match Hertz."""
+    big = [1e-3, 0.999e-3]
+    total = 4.0
+    # the gap the two hold (the third sphere is placed relative to it)
+    h = float(quiet_run(tb.Simulation(spheres(big), tb.Plates(0.3), tb.ForceTable([total]),
+                                      resolution=100, maps_every=0)).plate_gap[0])
+    tiny = 1e-8 * total
+    delta = (3 * tiny / (math.sqrt(2) * SOFT.E_star * math.sqrt(0.9e-3))) ** (2 / 3)
+    radii = [*big, (h + delta) / 2]
+    sim = tb.Simulation(spheres(radii), tb.Plates(0.3), tb.ForceTable([total]), resolution=100,
+                        maps_every=0)
+    ds = quiet_run(sim)
+    assert sim.status == "complete"
+    F = ds.normal_force.values[0]
+    assert F[2] == 0 and int(ds.loaded[0]) == 2
+    assert math.isclose(F.sum(), total, rel_tol=1e-12)
+    _, expected = hertz_sum(big, SOFT.E_star, total)
+    np.testing.assert_allclose(F[:2], expected, rtol=0.01)
