@@ -408,6 +408,12 @@ def test_run_case_resumes_a_partial_file_to_the_uninterrupted_result(tmp_path):
     assert record["status"] == "complete" and record["resumed"] and record["steps"] == 3
     xr.testing.assert_identical(without_times(open_results(partial / case.filename)),
                                 without_times(open_results(fresh / case.filename)))
+    # a second attempt on the finished file (its first worker died before reporting back)
+    # reuses it: computed in this sweep, not "already done" before it
+    mtime = (fresh / case.filename).stat().st_mtime_ns
+    again = run_case(case.data, sweep.base_dir, str(fresh), case.case_id)
+    assert again["status"] == "complete" and again["reused"] and not again.get("skipped")
+    assert (fresh / case.filename).stat().st_mtime_ns == mtime
 
 
 def test_run_case_restarts_a_partial_file_it_cannot_continue(tmp_path):

@@ -328,7 +328,8 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
     Resumes the file a killed attempt left behind. Returns a small record: ``case``,
     ``status`` (``complete``, ``failed: ...`` for a run stopped by a failed step, or
     ``error: ...`` when the case raised, its traceback written to ``<case_id>.error.txt``),
-    ``steps``, ``elapsed`` (s), ``resumed`` and ``worker`` (host:pid).
+    ``steps``, ``elapsed`` (s), ``resumed``, ``worker`` (host:pid) and ``reused`` when a
+    complete file was already there.
     """
     from . import Simulation, __version__, set_workers
 
@@ -342,7 +343,9 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
         set_workers(fft_threads)
         found = _read_case(path, ())
         if found is not None and not found.partial:
-            return {**record, "status": found.status, "skipped": True}
+            # an earlier attempt of this sweep finished the file (a worker killed between
+            # writing it and reporting back): the case was computed, not already done
+            return {**record, "status": found.status, "reused": True}
         config = parse_config(data, source=f"case {case_id}", base_dir=base_dir)
         particle, plates, load, numerics = config.build()
         sim = Simulation(particle, plates, load, **numerics)
