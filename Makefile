@@ -67,7 +67,7 @@ lint: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples
 
 bench: $(VENV)/.installed-bench
-	$(BIN)/python benchmarks/normal_hertz.py
+	$(BIN)/python benchmarks/normal_contact.py --json benchmarks/results/normal_contact.json --md benchmarks/results/normal_contact.md
 
 bench-tangential: $(VENV)/.installed-bench
 	$(BIN)/python benchmarks/tangential_cattaneo.py --md benchmarks/results/tangential_cattaneo.md

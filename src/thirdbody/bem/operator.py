@@ -12,7 +12,7 @@ Reference: Liu, S., Wang, Q., Liu, G. (2000). A versatile method of discrete con
 from __future__ import annotations
 
 import os
-from functools import lru_cache
+from functools import cached_property, lru_cache
 
 import numpy as np
 import scipy.fft as sfft
@@ -26,6 +26,8 @@ _DCFFT = ("Liu, S., Wang, Q., Liu, G. (2000). A versatile method of discrete con
 # One thread by default: the contact windows are small, and on a 2-core machine two threads
 # made every transform slower (measured, a 2N-padded real 2-D FFT pair: 7.6x at N = 32, 1.4x
 # at 128, 1.06-1.08x at 256-1024); a sweep or a layer runs its cases in parallel processes.
+#: cells added to a window for its periodic preconditioner (a margin against wrap-around)
+_PRECONDITION_PAD = 8
 _workers: int = int(os.environ.get("THIRDBODY_WORKERS", "0")) or 1
 
 
@@ -87,6 +89,45 @@ class _Transform:
         return np.ascontiguousarray(sfft.rfft2(kernel, workers=_workers).real)
 
 
+_STANLEY_KATO = ("Stanley, H. M., Kato, T. (1997). An FFT-based method for rough surface contact. "
+                 "J. Tribol. 119, 481-485 (the half-space's Fourier response 2/(E*|k|)).")
+
+
+@cites("lattice_symbol", _STANLEY_KATO)
+def boussinesq_symbol(py: int, px: int, spacing: tuple[float, float], E_star: float,
+                      aliases: int = 1) -> np.ndarray:
+    """Fourier symbol of the cell-to-centre normal influence on an infinite lattice, m/Pa.
+
+    The displacement at cell centres from uniform cell pressures is the lattice sampling of the
+    continuous response û(ξ) = 2/(E*|ξ|) p̂(ξ), with p̂ the transform of a uniform unit pressure on
+    one cell, dx dy sinc(ξx dx/2) sinc(ξy dy/2). Sampling folds the continuous spectrum, so at the
+    discrete frequency θ (rad per cell)
+
+        K̂(θ) = Σ_m 2/(E* |ξ_m|) sinc(θx_m/2) sinc(θy_m/2),  θ_m = θ + 2πm,  ξ_m = θ_m / (dx, dy)
+
+    summed over |mx|, |my| <= ``aliases`` (the folded terms alternate and fall off as 1/m²: one
+    ring leaves the near-field coefficients within 3 % of Love's, three within 0.3 %). Returned
+    on the ``rfft2`` layout of a ``(py, px)`` periodic grid; the θ = 0 entry (the unbounded mean
+    response) is ``inf``.
+
+    Unlike the transform of the tabulated kernel on a zero-padded window, this symbol does not
+    depend on the window: it is the free half-space's, at every wavelength.
+    """
+    dx, dy = spacing
+    ty = 2 * np.pi * sfft.fftfreq(py)[:, None]
+    tx = 2 * np.pi * sfft.rfftfreq(px)[None, :]
+    total = np.zeros((py, px // 2 + 1))
+    with np.errstate(divide="ignore"):
+        for my in range(-aliases, aliases + 1):
+            ay = ty + 2 * np.pi * my
+            for mx in range(-aliases, aliases + 1):
+                ax = tx + 2 * np.pi * mx
+                total += (2.0 / (E_star * np.hypot(ax / dx, ay / dy))
+                          * np.sinc(ax / (2 * np.pi)) * np.sinc(ay / (2 * np.pi)))
+    total[0, 0] = np.inf
+    return total
+
+
 @cites("dcfft", _DCFFT)
 class NormalOperator:
     """u_z = K_zz * p on a ``(ny, nx)`` window: pressure (Pa) to normal displacement (m).
@@ -110,6 +151,24 @@ class NormalOperator:
         spec = self._t.forward(pressure)
         spec *= self.spectrum
         return self._t.inverse(spec)
+
+    @cached_property
+    def _preconditioner(self) -> tuple[tuple[int, int], np.ndarray]:
+        ny, nx = self.shape
+        size = (sfft.next_fast_len(ny + _PRECONDITION_PAD, real=True),
+                sfft.next_fast_len(nx + _PRECONDITION_PAD, real=True))
+        return size, 1.0 / boussinesq_symbol(*size, self.spacing, self.E_star)
+
+    def precondition(self, residual: np.ndarray) -> np.ndarray:
+        """Approximate inverse of this operator, pressure (Pa) from a displacement field (m):
+        the field is convolved, periodically on the window plus ``_PRECONDITION_PAD`` cells,
+        with the inverse of :func:`boussinesq_symbol`. The inverse kernel falls off as 1/r³, so
+        the wrap-around costs nothing measurable (the same CG iteration counts as on a 2x padded
+        grid, window-filling ellipses at 128² to 1024²), and the transforms are 4x smaller."""
+        (py, px), inv = self._preconditioner
+        spec = sfft.rfft2(residual, s=(py, px), workers=_workers)
+        spec *= inv
+        return sfft.irfft2(spec, s=(py, px), workers=_workers)[: self.shape[0], : self.shape[1]]
 
 
 @cites("dcfft", _DCFFT)
