@@ -93,6 +93,27 @@ _STANLEY_KATO = ("Stanley, H. M., Kato, T. (1997). An FFT-based method for rough
                  "J. Tribol. 119, 481-485 (the half-space's Fourier response 2/(E*|k|)).")
 
 
+def _folded(py: int, px: int, spacing: tuple[float, float], aliases: int, response):
+    """Σ_m response(ξx_m, ξy_m, |ξ_m|) sinc(θx_m/2) sinc(θy_m/2) on the ``rfft2`` layout of a
+    ``(py, px)`` periodic grid, θ_m = θ + 2πm, ξ_m = θ_m / (dx, dy), |mx|, |my| <= aliases.
+    ``response`` returns a tuple of arrays (one per kernel block)."""
+    dx, dy = spacing
+    ty = 2 * np.pi * sfft.fftfreq(py)[:, None]
+    tx = 2 * np.pi * sfft.rfftfreq(px)[None, :]
+    total = None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for my in range(-aliases, aliases + 1):
+            ay = ty + 2 * np.pi * my
+            for mx in range(-aliases, aliases + 1):
+                ax = tx + 2 * np.pi * mx
+                xi_x, xi_y = ax / dx, ay / dy
+                cell = np.sinc(ax / (2 * np.pi)) * np.sinc(ay / (2 * np.pi))
+                terms = [t * cell for t in response(xi_x, xi_y, np.hypot(xi_x, xi_y))]
+                total = terms if total is None else [a + b for a, b in zip(total, terms,
+                                                                           strict=True)]
+    return total
+
+
 @cites("lattice_symbol", _STANLEY_KATO)
 def boussinesq_symbol(py: int, px: int, spacing: tuple[float, float], E_star: float,
                       aliases: int = 1) -> np.ndarray:
@@ -113,19 +134,30 @@ def boussinesq_symbol(py: int, px: int, spacing: tuple[float, float], E_star: fl
     Unlike the transform of the tabulated kernel on a zero-padded window, this symbol does not
     depend on the window: it is the free half-space's, at every wavelength.
     """
-    dx, dy = spacing
-    ty = 2 * np.pi * sfft.fftfreq(py)[:, None]
-    tx = 2 * np.pi * sfft.rfftfreq(px)[None, :]
-    total = np.zeros((py, px // 2 + 1))
-    with np.errstate(divide="ignore"):
-        for my in range(-aliases, aliases + 1):
-            ay = ty + 2 * np.pi * my
-            for mx in range(-aliases, aliases + 1):
-                ax = tx + 2 * np.pi * mx
-                total += (2.0 / (E_star * np.hypot(ax / dx, ay / dy))
-                          * np.sinc(ax / (2 * np.pi)) * np.sinc(ay / (2 * np.pi)))
+    (total,) = _folded(py, px, spacing, aliases, lambda kx, ky, k: (2.0 / (E_star * k),))
     total[0, 0] = np.inf
     return total
+
+
+@cites("lattice_symbol", _STANLEY_KATO)
+def cerruti_symbol(py: int, px: int, spacing: tuple[float, float], G: float, nu: float,
+                   aliases: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Fourier symbols (xx, xy, yy) of the cell-to-centre tangential influence on an infinite
+    lattice, m/Pa: as :func:`boussinesq_symbol`, with the continuous Cerruti response
+
+        Ĝ_ij(ξ) = (δ_ij − ν ξ_i ξ_j / |ξ|²) / (G |ξ|)
+
+    (the transform of Johnson's (1985) eq. 3.86a point solution, since the transform of
+    x_i x_j / r³ is 2π (δ_ij − ξ_i ξ_j/|ξ|²)/|ξ|). The θ = 0 entries are ``inf`` (xx, yy) and 0.
+    """
+    def response(kx, ky, k):
+        c = 1.0 / (G * k)
+        return (c * (1 - nu * kx * kx / (k * k)), -c * nu * kx * ky / (k * k),
+                c * (1 - nu * ky * ky / (k * k)))
+
+    sxx, sxy, syy = _folded(py, px, spacing, aliases, response)
+    sxx[0, 0], sxy[0, 0], syy[0, 0] = np.inf, 0.0, np.inf
+    return sxx, sxy, syy
 
 
 @cites("dcfft", _DCFFT)
@@ -191,6 +223,34 @@ class TangentialOperator:
         self.spectra = tuple(self._t.kernel_spectrum(k) for k in (kxx, kxy, kyy))
         #: self-influence (K_xx(0), K_yy(0)) in m/Pa
         self.self_terms = (float(kxx[0, 0]), float(kyy[0, 0]))
+
+    @cached_property
+    def _preconditioner(self) -> tuple[tuple[int, int], tuple[np.ndarray, ...]]:
+        ny, nx = self.shape
+        size = (sfft.next_fast_len(ny + _PRECONDITION_PAD, real=True),
+                sfft.next_fast_len(nx + _PRECONDITION_PAD, real=True))
+        sxx, sxy, syy = cerruti_symbol(*size, self.spacing, self.G, self.nu)
+        with np.errstate(invalid="ignore"):
+            det = sxx * syy - sxy * sxy
+            inverse = (syy / det, -sxy / det, sxx / det)
+        inverse[0][0, 0] = inverse[1][0, 0] = inverse[2][0, 0] = 0.0
+        return size, (*inverse, 1.0 / sxx)
+
+    def precondition(self, residual: np.ndarray, scalar: bool = False) -> np.ndarray:
+        """Approximate inverse of this operator, traction (Pa) from a displacement field (m),
+        ``(2, ny, nx)`` (or ``(1, ny, nx)`` with ``scalar``: x only, ν's x-y coupling dropped):
+        the inverse of :func:`cerruti_symbol`, applied periodically on the window plus
+        ``_PRECONDITION_PAD`` cells, as :meth:`NormalOperator.precondition`."""
+        (py, px), (ixx, ixy, iyy, ix) = self._preconditioner
+        ny, nx = self.shape
+        spec = sfft.rfft2(residual, s=(py, px), workers=_workers)
+        if scalar:
+            spec[0] *= ix
+        else:
+            fx, fy = spec[0].copy(), spec[1]
+            spec[0] = ixx * fx + ixy * fy
+            spec[1] = ixy * fx + iyy * fy
+        return sfft.irfft2(spec, s=(py, px), workers=_workers)[:, :ny, :nx]
 
     def __call__(self, traction: np.ndarray) -> np.ndarray:
         sx, sy = self._t.forward(traction)
