@@ -311,12 +311,29 @@ class Potato(Shape):
         return self._implicit_q(q[..., 0], q[..., 1], q[..., 2])
 
     def _implicit_q(self, qx: FloatArray, qy: FloatArray, qz: FloatArray) -> FloatArray:
+        # the hot loop of every ray cast: in-place arithmetic, one temporary per wave
         a, b, c = (float(v) for v in self._axes)
-        n = np.sqrt(qx * qx + qy * qy + qz * qz)
+        qx, qy, qz = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (qx, qy, qz)))
+        scalar = qx.ndim == 0
+        qx, qy, qz = (np.atleast_1d(v) for v in (qx, qy, qz))
         with np.errstate(divide="ignore", invalid="ignore"):
-            m = self._modulation(qx / n, qz / n)
-        ell = np.sqrt((qx / a) ** 2 + (qy / b) ** 2 + (qz / c) ** 2)
-        return ell / m - 1.0
+            inv_n = 1.0 / np.sqrt(qx * qx + qy * qy + qz * qz)
+            m = np.ones(qx.shape)
+            for amp, k, ex, ez, ph in zip(self._amp, self._k, self._ex, self._ez, self._phase,
+                                          strict=True):
+                arg = qx * (k * ex) + qz * (k * ez)     # k (d · e) with d = q/|q|
+                arg *= inv_n
+                arg += ph
+                np.sin(arg, out=arg)
+                arg *= amp
+                m += arg
+        ell = (qx * (1.0 / a)) ** 2
+        ell += (qy * (1.0 / b)) ** 2
+        ell += (qz * (1.0 / c)) ** 2
+        np.sqrt(ell, out=ell)
+        ell /= m
+        ell -= 1.0
+        return ell[0] if scalar else ell
 
     def mirrored(self) -> Potato:
         """The potato mirrored in body x: every wave direction β becomes π − β."""
