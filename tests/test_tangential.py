@@ -265,3 +265,27 @@ def test_preconditioner_symbols_are_the_lattice_transforms_of_cerruti_coefficien
             else:
                 rel = (got[1:] - got[0]) / (exact[1:, comp] - exact[0, comp]) - 1
             assert np.abs(rel).max() < tol, (aliases, comp, rel)
+
+
+def test_preconditioners_invert_the_operators_on_smooth_and_rough_fields():
+    """K⁻¹ from the lattice symbols undoes the exact (DC-FFT, Love/Cerruti) operators: on a
+    bump well inside a 96² window, smooth or modulated near the grid's Nyquist frequency, the
+    field comes back within 2 % / 5 % (normal) and 0.5 % / 3 % (tangential, rectangular
+    cells, ν = 0.3). Without the folded aliases the rough ones come back 60 % / 41 % off."""
+    from thirdbody.bem.operator import normal_operator, tangential_operator
+
+    n, h = 96, 1e-6
+    y, x = np.mgrid[0:n, 0:n] - n / 2 + 0.5
+    bump = np.exp(-(x**2 + y**2) / (2 * 8.0**2))
+    core = (slice(None), slice(n // 4, 3 * n // 4), slice(n // 4, 3 * n // 4))
+    K = normal_operator((n, n), (h, h), 1e11)
+    for field, tol in ((bump * (1 + 0.3 * np.cos(x / 3)), 0.02),
+                       (bump * np.cos(2.5 * x) * np.cos(1.9 * y), 0.05)):
+        back = K.precondition(K(field))
+        assert np.abs(back - field)[core[1:]].max() < tol * np.abs(field).max()
+    T = tangential_operator((n, n), (h, 1.3 * h), 8e10, 0.3)
+    for field, tol in ((np.stack([bump * np.cos(y / 4), bump * np.sin(x / 5)]), 0.005),
+                       (np.stack([bump * np.cos(2.6 * y),
+                                  bump * np.cos(2.2 * x) * np.cos(1.1 * y)]), 0.03)):
+        back = T.precondition(T(field))
+        assert np.abs(back - field)[core].max() < tol * np.abs(field).max()
