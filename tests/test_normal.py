@@ -266,6 +266,7 @@ def test_iterations_do_not_grow_with_refinement(case):
             assert (cols[-1] - cols[0] + 1) / n == pytest.approx(2 / 3, abs=0.02)
         counts.append(res.iterations)
     assert max(counts) <= 25, counts
+    assert min(counts) >= 5, counts     # a count, not a constant: 1e-8 needs several CG steps
     assert all(b <= 1.3 * a for a, b in itertools.pairwise(counts)), counts
 
 

@@ -456,3 +456,22 @@ def test_potato_surfaces_are_pinned_to_their_values_before_the_fast_ray_casting(
                 assert (np.isnan(got) == np.isnan(want)).all()
                 assert np.isfinite(want).sum() > 100
                 np.testing.assert_allclose(got, want, rtol=0, atol=1e-16)
+
+
+def test_potato_implicit_function_against_its_definition(potato: Potato) -> None:
+    """F(q) = |q/axes| / (1 + Σ a sin(k (d_x cos β + d_z sin β) + φ)) − 1, d = q/|q|, q the point
+    from the wave centre, written out here from the waves; for one point (a float) and for a
+    batch (shape kept)."""
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-1.2, 1.2, size=(7, 5, 3)) * potato.size
+    q = pts - potato.wave_centre
+    d = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    m = 1.0 + sum(w.amplitude * np.sin(w.wavenumber * (d[..., 0] * np.cos(w.direction)
+                                                        + d[..., 2] * np.sin(w.direction))
+                                        + w.phase) for w in potato.waves)
+    expected = np.linalg.norm(q / potato.semi_axes, axis=-1) / m - 1.0
+    got = potato.implicit(pts)
+    assert got.shape == (7, 5)
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-13)
+    one = potato.implicit(pts[2, 3])
+    assert np.ndim(one) == 0 and float(one) == pytest.approx(expected[2, 3], rel=1e-13)
