@@ -66,26 +66,6 @@ def _grid(n: int, length: float) -> tuple[float, np.ndarray]:
     return h, (np.arange(n) + 0.5) * h - length / 2
 
 
-def _elliptic_hertz(ratio: float, force: float, e_star: float, r_y: float) -> dict:
-    """Semi-axes, peak pressure and approach of the gap A x^2 + B y^2, B/A = ratio (FORMULAS.md,
-    after Johnson 1985 s. 4.2), solved for e here with scipy's complete elliptic integrals."""
-    from scipy.optimize import brentq
-    from scipy.special import ellipe, ellipk
-
-    a_coef, b_coef = 1 / (2 * ratio * r_y), 1 / (2 * r_y)
-
-    def ratio_of(e2):
-        k, e = ellipk(e2), ellipe(e2)
-        return (e / (1 - e2) - k) / (k - e) - ratio
-
-    e2 = brentq(ratio_of, 1e-9, 1 - 1e-12, xtol=1e-15)
-    k, e = ellipk(e2), ellipe(e2)
-    a = (3 * force * (k - e) / (2 * math.pi * e_star * a_coef * e2)) ** (1 / 3)
-    b = a * math.sqrt(1 - e2)
-    p0 = 3 * force / (2 * math.pi * a * b)
-    return {"A": a_coef, "B": b_coef, "a": a, "b": b, "p0": p0, "delta": p0 * b * k / e_star}
-
-
 def _rough(n: int, length: float, seed: int = 7) -> np.ndarray:
     """Band-limited self-affine heights (m), zero mean, rms slope 1e-4, on the N x N centres: the
     same sum of Fourier modes (wavelengths L/2 to L/64, Hurst 0.8) evaluated at any N."""
@@ -114,9 +94,13 @@ def make_problem(case: str, n: int) -> dict:
         gap = (c[None, :] ** 2 + c[:, None] ** 2) / (2 * radius)
         ref = {"delta": a * a / radius, "p0": 3 * FORCE / (2 * math.pi * a * a), "a": a}
     elif case in ("ellipse3", "ellipse10"):
-        ref = _elliptic_hertz(float(case[7:]), FORCE, e_star, r_y=0.02)
+        from thirdbody.reference import hertz  # analytic, checked against FORMULAS.md
+
+        r_y, r_x = 0.02, 0.02 * float(case[7:])
+        ell = hertz.elliptic_from_radii(FORCE, r_x, r_y, e_star)
+        ref = {"delta": ell.approach, "p0": ell.peak_pressure, "a": ell.semi_axis_x}
         h, c = _grid(n, 3 * ref["a"])
-        gap = ref["A"] * c[None, :] ** 2 + ref["B"] * c[:, None] ** 2
+        gap = c[None, :] ** 2 / (2 * r_x) + c[:, None] ** 2 / (2 * r_y)
     elif case == "two_spots":
         a = LENGTH / 10
         radius = 4 * e_star * a**3 / (3 * FORCE)

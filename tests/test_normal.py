@@ -213,27 +213,10 @@ def test_properties_on_wavy_surfaces(amp, kx, ky, phase, load, cx):
 
 # ---- convergence that depends neither on the grid nor on the contact's shape (issue 13) ----
 
-def _elliptic_semi_major(ratio: float, force: float, e_star: float, r_y: float) -> float:
-    """Semi-major axis of the Hertz ellipse for the gap x²/(2 ratio r_y) + y²/(2 r_y), solved here
-    from Johnson (1985) eqs 4.39-4.41 with scipy's complete elliptic integrals."""
-    from scipy.optimize import brentq
-    from scipy.special import ellipe, ellipk
-
-    A = 1 / (2 * ratio * r_y)
-
-    def miss(e2):
-        k, e = ellipk(e2), ellipe(e2)
-        return (e / (1 - e2) - k) / (k - e) - ratio
-
-    e2 = brentq(miss, 1e-9, 1 - 1e-12, xtol=1e-15)
-    k, e = ellipk(e2), ellipe(e2)
-    return (3 * force * (k - e) / (2 * np.pi * e_star * A * e2)) ** (1 / 3)
-
-
 def _window_filling_ellipse(n: int, ratio: float) -> tuple[np.ndarray, float]:
     """R_x/R_y = ratio on a window of 3 semi-major axes: the contact spans 2/3 of the window."""
     mat = tb.Material(210e9, 0.3)
-    a = _elliptic_semi_major(ratio, 1.0, mat.E_star, 0.02)
+    a = hertz.elliptic_from_radii(1.0, ratio * 0.02, 0.02, mat.E_star).semi_axis_x
     h = 3 * a / n
     c = (np.arange(n) + 0.5) * h - 1.5 * a
     return c[None, :] ** 2 / (2 * ratio * 0.02) + c[:, None] ** 2 / (2 * 0.02), h

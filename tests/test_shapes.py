@@ -433,7 +433,7 @@ def test_tessellated_potato_matches_potato(trimesh, potato: Potato) -> None:
 
 
 def test_potato_surfaces_are_pinned_to_their_values_before_the_fast_ray_casting():
-    """Issue 13 made the vertical-ray casting cheaper (every third sample first, the rest only
+    """Issue 13 made the vertical-ray casting cheaper (every fourth sample first, the rest only
     where the Lipschitz bound cannot rule a crossing out; in-place arithmetic). The surfaces of
     three potatoes, four random 3-D orientations each, 500 random rays, equal the ones written
     by the code before the change (``tests/data/surfaces_pinned.npz``) to 1e-16 m (the root

@@ -4,8 +4,10 @@ The problem on a window of cells: find pressures p >= 0 (Pa) and the approach δ
 the deformed separation s = g + u - δ satisfies s >= 0, p s = 0, with u = K_zz * p the normal
 displacement (positive away from the plate) and, in force control, Σ p ΔA = F.
 
-Algorithm: the constrained conjugate gradient of Polonsky & Keer (1999), with three accelerations
-that leave the discrete problem unchanged:
+Algorithm: an active-set method (CG on a fixed contact set, preconditioned with the inverse of
+the half-space's lattice symbol, see :func:`_active_set_pcg`), with the constrained conjugate
+gradient of Polonsky & Keer (1999) as the fallback, and three accelerations that leave the
+discrete problem unchanged:
 
 1. **Candidate box.** Because every influence coefficient is positive, u >= 0 for p >= 0, so no
    cell with g >= δ can be in contact. Each solve runs on the bounding box of {g < δ} (plus a

@@ -102,7 +102,7 @@ def golden_minimum(
     return best_z, best_f
 
 
-#: fine samples per coarse interval of :func:`_sample` (every third sample is evaluated first)
+#: samples per coarse interval of :func:`_sample` (every fourth sample is evaluated first)
 _COARSE_STRIDE = 4
 #: safety factor on the Lipschitz bound when :func:`_sample` skips an interval
 _SKIP_MARGIN = 1.0
@@ -111,31 +111,33 @@ _SKIP_MARGIN = 1.0
 def _sample(fun: RayFunction, rays: IntArray, z: FloatArray, lh: FloatArray) -> FloatArray:
     """``fun`` on every ray at the abscissae ``z`` (m, n), or a stand-in where it cannot matter.
 
-    Every third sample (and the last) is evaluated first. Between two such samples a and b the
-    skipped ones lie within one spacing h of a or b, so with |f'| <= L (``lh`` = L h per ray)
-    they are all > L h if min(f(a), f(b)) > 2 L h, and all < -L h if max(f(a), f(b)) < -2 L h.
+    Every fourth sample (and the last) is evaluated first. Between two such samples a and b each
+    skipped sample lies within two spacings h of a or b, so with |f'| <= L (``lh`` = L h per
+    ray) they are all > L h if min(f(a), f(b)) > 3 L h, and all < 0 if max(f(a), f(b)) < -2 L h.
     Such intervals (with a factor :data:`_SKIP_MARGIN` on L) are filled with +inf or -inf: the
     callers only look at the signs there and at sampled minima below L h, so they make the same
     decisions, from the same evaluated values, as with every sample evaluated. The other
-    intervals, about the surface crossings, are evaluated in full. Typically 40 % of the
-    evaluations of the full sampling.
+    intervals, about the surface crossings, are evaluated in full, in one call of ``fun``.
+    On the Fig. 3 run this is about 55 % of the full sampling's evaluations.
     """
     m, n = z.shape
     coarse = np.unique(np.r_[np.arange(0, n, _COARSE_STRIDE), n - 1])
     f = np.empty((m, n))
     f[:, coarse] = fun(rays[:, None], z[:, coarse])
     fa, fb = f[:, coarse[:-1]], f[:, coarse[1:]]
-    bound = (2.0 * _SKIP_MARGIN * lh)[:, None]
-    outside = np.minimum(fa, fb) > bound
-    inside = np.maximum(fa, fb) < -bound
-    for k in range(1, _COARSE_STRIDE):
-        cols = coarse[:-1] + k
-        has = cols < coarse[1:]                 # the last interval may be shorter
-        cols, out, ins = cols[has], outside[:, has], inside[:, has]
-        f[:, cols] = np.where(out, np.inf, np.where(ins, -np.inf, np.nan))
-        rr, cc = np.nonzero(~(out | ins))
-        if rr.size:
-            f[rr, cols[cc]] = fun(rays[rr], z[rr, cols[cc]])
+    reach = _COARSE_STRIDE // 2          # spacings from a skipped sample to the nearer end
+    lh = (_SKIP_MARGIN * lh)[:, None]
+    outside = np.minimum(fa, fb) > (reach + 1) * lh
+    inside = np.maximum(fa, fb) < -reach * lh
+    # every skipped column with its interval: (column, interval index)
+    cols = (coarse[:-1, None] + np.arange(1, _COARSE_STRIDE)[None, :]).ravel()
+    owner = np.repeat(np.arange(coarse.size - 1), _COARSE_STRIDE - 1)
+    real = cols < coarse[1:][owner]              # the last interval may be shorter
+    cols, owner = cols[real], owner[real]
+    f[:, cols] = np.where(outside[:, owner], np.inf, np.where(inside[:, owner], -np.inf, np.nan))
+    rr, cc = np.nonzero(~(outside | inside)[:, owner])
+    if rr.size:
+        f[rr, cols[cc]] = fun(rays[rr], z[rr, cols[cc]])
     return f
 
 

@@ -190,11 +190,19 @@ class Potato(Shape):
 
     # --- the radial function ------------------------------------------------------------------
     def _modulation(self, dx: FloatArray, dz: FloatArray) -> FloatArray:
+        """m = 1 + Σ a sin(k (dx cos β + dz sin β) + φ); in place, one temporary per wave (it
+        is the hot loop of every ray cast)."""
         m = np.ones(np.broadcast_shapes(np.shape(dx), np.shape(dz)))
         for a, k, ex, ez, ph in zip(
             self._amp, self._k, self._ex, self._ez, self._phase, strict=True
         ):
-            m += a * np.sin(k * (dx * ex + dz * ez) + ph)
+            arg = np.asarray(dx * ex, dtype=float)
+            arg += dz * ez
+            arg *= k
+            arg += ph
+            np.sin(arg, out=arg)
+            arg *= a
+            m += arg
         return m
 
     def radius(self, directions: ArrayLike) -> FloatArray:
@@ -311,29 +319,17 @@ class Potato(Shape):
         return self._implicit_q(q[..., 0], q[..., 1], q[..., 2])
 
     def _implicit_q(self, qx: FloatArray, qy: FloatArray, qz: FloatArray) -> FloatArray:
-        # the hot loop of every ray cast: in-place arithmetic, one temporary per wave
         a, b, c = (float(v) for v in self._axes)
-        qx, qy, qz = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (qx, qy, qz)))
-        scalar = qx.ndim == 0
-        qx, qy, qz = (np.atleast_1d(v) for v in (qx, qy, qz))
+        n = np.sqrt(qx * qx + qy * qy + qz * qz)
         with np.errstate(divide="ignore", invalid="ignore"):
-            inv_n = 1.0 / np.sqrt(qx * qx + qy * qy + qz * qz)
-            m = np.ones(qx.shape)
-            for amp, k, ex, ez, ph in zip(self._amp, self._k, self._ex, self._ez, self._phase,
-                                          strict=True):
-                arg = qx * (k * ex) + qz * (k * ez)     # k (d · e) with d = q/|q|
-                arg *= inv_n
-                arg += ph
-                np.sin(arg, out=arg)
-                arg *= amp
-                m += arg
-        ell = (qx * (1.0 / a)) ** 2
-        ell += (qy * (1.0 / b)) ** 2
-        ell += (qz * (1.0 / c)) ** 2
+            m = self._modulation(qx / n, qz / n)
+        ell = np.asarray((qx / a) ** 2, dtype=float)
+        ell += (qy / b) ** 2
+        ell += (qz / c) ** 2
         np.sqrt(ell, out=ell)
         ell /= m
         ell -= 1.0
-        return ell[0] if scalar else ell
+        return ell
 
     def mirrored(self) -> Potato:
         """The potato mirrored in body x: every wave direction β becomes π − β."""
