@@ -20,6 +20,7 @@ POINT = {
     / (2 * np.pi * G),
     "xy": lambda X, Y: NU * X * Y / np.hypot(X, Y) ** 3 / (2 * np.pi * G),
     "zx": lambda X, Y: (1 - 2 * NU) * X / (X**2 + Y**2) / (4 * np.pi * G),
+    "zy": lambda X, Y: (1 - 2 * NU) * Y / (X**2 + Y**2) / (4 * np.pi * G),
 }
 
 
@@ -29,6 +30,8 @@ def closed_form(name, x, y):
         "zz": influence.normal(x, y, HALF_X, HALF_Y, E_STAR),
         "xx": kxx, "yy": kyy, "xy": kxy,
         "zx": influence.coupling(x, y, HALF_X, HALF_Y, G, NU),
+        # the operator's K_zy: H_x with the roles of x and y exchanged
+        "zy": (1 - 2 * NU) * influence.coupling_integral(y, x, HALF_Y, HALF_X) / (4 * np.pi * G),
     }[name]
 
 

@@ -109,6 +109,13 @@ class Simulation:
         radius); above it the particle's twist relative to the plates is solved for (``inf``:
         never). The tilting couple's lever arms never twist (F' is parallel to the offset of the
         pressure centroids); the tractions of non-symmetric or multi-spot contacts can.
+    coupling : bool
+        Normal-tangential coupling for ν < 0.5 (default False: Goodman's approximation, the
+        paper's model). Each evaluation of the particle alternates the normal solves with the
+        tangential solves under the demand F' they imply until both stop changing
+        (Panagiotopoulos' process, :func:`thirdbody.bem.solve_coupled`); the shear's normal
+        displacement then moves the pressure centroids and so the turning load. A material
+        with ν = 0.5 gives the uncoupled results exactly.
     workers : int
         Processes that turn the particles of a layer in parallel (the turns of one round are
         independent: each holds the others as they were at the round's start); 1 runs
@@ -122,7 +129,7 @@ class Simulation:
                  resolution: float = 80.0, cell_size: float | None = None,
                  tol: float = 1e-8, angle_step_deg: float = 1.0, angle_tol_deg: float = 0.01,
                  maps_every: int = 5, classification: str = "statics",
-                 twist_tol: float = 1e-3, workers: int = 1) -> None:
+                 twist_tol: float = 1e-3, workers: int = 1, coupling: bool = False) -> None:
         from ._validate import positive, real
 
         if isinstance(particle, Layer):
@@ -154,7 +161,10 @@ class Simulation:
         self.twist_tol = math.inf if twist_tol == math.inf else real(
             "twist_tol", twist_tol, "[0, inf]", lambda x: x >= 0)
         self.schedule: list[LoadStep] = load.schedule()
-        self.members = [Member(p.particle, plates, c, self.tol, self.twist_tol)
+        if not isinstance(coupling, bool):
+            raise ValueError(f"coupling must be true or false, got {coupling!r}")
+        self.coupling = coupling
+        self.members = [Member(p.particle, plates, c, self.tol, self.twist_tol, coupling)
                         for p, c in zip(self.layer, cells, strict=True)]
         self.cell_size = cells[0]
         self.resolution = self.layer[0].particle.shape.size / self.cell_size
@@ -206,6 +216,7 @@ class Simulation:
             "angle_tol_deg": math.degrees(self.angle_tol),
             "maps_every": self.maps_every, "classification": self.classification,
             "twist_tol": self.twist_tol, "d0": self.d0,
+            **({"coupling": 1} if self.coupling else {}),
         }
         if self.single:
             return {**self._particle_inputs(self.particle), **common}
@@ -376,6 +387,8 @@ class Simulation:
         self._share_error = 0.0
         clock0 = [(m.statics.normal_time, m.statics.geometry_time) for m in self.members]
         starts = [s.rotation for s in state.particles]
+        for m, s in zip(self.members, state.particles, strict=True):
+            m.begin_step(s)
         evs = self._equilibrium(step, state, None)
         first = list(evs)
         kinds = [RigidState.STICK] * n

@@ -75,12 +75,11 @@ def tangential(x, y, half_x: float, half_y: float, G: float, nu: float
     return c * ((1 - nu) * A + B), c * nu * R, c * ((1 - nu) * B + A)
 
 
-def coupling(x, y, half_x: float, half_y: float, G: float, nu: float) -> np.ndarray:
-    """K_zx: normal displacement (m) per unit shear traction τ_x (Pa); K_xz = -K_zx.
-
-    ``(1-2ν) H_x / (4πG)`` with H_x = ∫∫ X/ρ² (Johnson 1985, eq. 3.86a). Provided for checks of
-    the Goodman approximation; the solvers do not use it.
-    """
+def coupling_integral(x, y, half_x: float, half_y: float) -> np.ndarray:
+    """H_x = ∫∫ X/ρ² over the cell [-a, a] x [-b, b] seen from field point (x, y) (m), with
+    (X, Y) the offset from the source point; odd in x, even in y. H_y is this function with
+    the roles of x and y exchanged. Exact closed form, finite on the cell's edge lines and
+    inside the cell."""
     k, l, m, n = _corners(x, y, half_x, half_y)
 
     def F(X, Y):
@@ -91,5 +90,15 @@ def coupling(x, y, half_x: float, half_y: float, G: float, nu: float) -> np.ndar
             t2 = np.where(X != 0, X * np.arctan(Y / np.where(X != 0, X, 1.0)), 0.0)
         return t1 + t2
 
-    H = F(k, m) - F(k, n) - F(l, m) + F(l, n)
-    return (1 - 2 * nu) * H / (4 * np.pi * G)
+    return F(k, m) - F(k, n) - F(l, m) + F(l, n)
+
+
+def coupling(x, y, half_x: float, half_y: float, G: float, nu: float) -> np.ndarray:
+    """K_zx: normal displacement (m, into the body) per unit shear traction τ_x (Pa) on the
+    cell; by reciprocity K_xz = -K_zx (tangential displacement per unit pressure).
+
+    ``(1-2ν) H_x / (4πG)`` with H_x = ∫∫ X/ρ² (:func:`coupling_integral`; Johnson 1985,
+    eq. 3.86a). For a contact pair the factor is β/(πE*) instead, Dundurs' β
+    (:class:`~thirdbody.bem.pair.ElasticPair`).
+    """
+    return (1 - 2 * nu) * coupling_integral(x, y, half_x, half_y) / (4 * np.pi * G)

@@ -29,7 +29,8 @@ import numpy as np
 from .._citations import cites
 from ..material import Material
 from .grid import Grid
-from .operator import normal_operator
+from .operator import coupling_operator, normal_operator
+from .pair import ElasticPair
 
 _PK = ("Polonsky, I. A., Keer, L. M. (1999). A numerical method for solving rough contact "
        "problems based on the multi-level multi-summation and conjugate gradient techniques. "
@@ -53,13 +54,16 @@ class NormalContact:
     pressure : (ny, nx) array
         Contact pressure in Pa (cell values, >= 0, compressive).
     displacement : (ny, nx) array
-        Normal elastic displacement of the particle surface in m, positive away from the plate.
+        Normal elastic displacement of the particle surface in m, positive away from the plate
+        (with coupling: that of the pressure plus that of ``traction``).
     contact : (ny, nx) bool array
         Cells in contact (p > 0).
     gap : (ny, nx) array
         The undeformed gap (m) that was solved for.
     grid : Grid
-    material : Material
+    pair : ElasticPair
+        The elastic constants of the contact pair (particle against rigid plate: from the
+        particle's material).
     approach : float
         Rigid approach δ of the plate in m (the separation is s = gap + displacement - approach).
     force : float
@@ -71,6 +75,9 @@ class NormalContact:
     converged : bool
     methods : tuple[str, ...]
         Names of the published methods used (see :func:`thirdbody.citations`).
+    traction : (2, ny, nx) array or None
+        The shear tractions (Pa) whose coupled normal displacement was included (coupling on
+        and β ≠ 0), else None.
     """
 
     pressure: np.ndarray
@@ -78,7 +85,7 @@ class NormalContact:
     contact: np.ndarray
     gap: np.ndarray = field(repr=False)
     grid: Grid
-    material: Material
+    pair: ElasticPair
     approach: float
     force: float
     iterations: int
@@ -86,6 +93,7 @@ class NormalContact:
     converged: bool
     methods: tuple[str, ...] = ("active_set_pcg", "lattice_symbol", "polonsky_keer1999",
                                 "love1929", "dcfft")
+    traction: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def area(self) -> float:
@@ -395,10 +403,11 @@ def _outside(box: tuple[slice, slice], shape: tuple[int, int]) -> np.ndarray:
     return mask
 
 
-def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
+def solve_normal(gap: np.ndarray, grid: Grid, material: Material | ElasticPair, *,
                  force: float | None = None, approach: float | None = None,
                  tol: float = 1e-8, max_iter: int = 1000,
-                 initial: np.ndarray | None = None) -> NormalContact:
+                 initial: np.ndarray | None = None,
+                 traction: np.ndarray | None = None) -> NormalContact:
     """Solve the frictionless contact of a rigid flat plate on the particle's surface.
 
     Parameters
@@ -409,8 +418,10 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
         the particle does not cover).
     grid : Grid
         The window; ``gap.shape`` must equal ``grid.shape``.
-    material : Material
-        The particle's elastic constants; the plate is rigid, so E* = E/(1-ν²).
+    material : Material or ElasticPair
+        The contact pair's elastic constants (:class:`~thirdbody.bem.pair.ElasticPair`); a
+        :class:`~thirdbody.material.Material` is the particle against a rigid plate, so
+        E* = E/(1-ν²).
     force : float, optional
         Prescribed total normal force in N (> 0). Exactly one of ``force`` and ``approach``.
     approach : float, optional
@@ -421,6 +432,11 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
         Iteration budget per level; exceeding it raises :class:`ConvergenceError`.
     initial : (ny, nx) array, optional
         A pressure guess (Pa), e.g. the previous load step's; skips the coarse-to-fine start.
+    traction : (2, ny, nx) array, optional
+        Normal-tangential coupling: the shear tractions (τ_x, τ_y) the plate exerts on the
+        particle, Pa. Their normal displacement K_zx * τ_x + K_zy * τ_y (Cerruti; zero when the
+        pair's Dundurs β is 0) is added to the surface's, so the pressure is solved for the
+        gap they leave. Default: none (Goodman's approximation).
 
     Returns
     -------
@@ -458,6 +474,19 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
         raise ValueError(f"tol must be > 0, got {tol!r}")
     if initial is not None and np.shape(initial) != grid.shape:
         raise ValueError(f"initial has shape {np.shape(initial)}, expected {grid.shape}")
+    pair = material if isinstance(material, ElasticPair) else ElasticPair.rigid_plate(material)
+    coupled = None
+    if traction is not None:
+        traction = np.asarray(traction, dtype=float)
+        if traction.shape != (2, *grid.shape) or not np.isfinite(traction).all():
+            raise ValueError(f"traction must be a finite (2, {grid.ny}, {grid.nx}) array in Pa, "
+                             f"got shape {traction.shape}")
+        if pair.coupled and traction.any():
+            coupled = coupling_operator(grid.shape, grid.spacing,
+                                        pair.coupling_modulus).normal(traction)
+            g = g + coupled
+        else:
+            traction = None
 
     g0 = float(np.min(g))
     g = g - g0  # work with the closest point at zero; the approach is reported in gap units
@@ -469,8 +498,9 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
         raise ValueError(f"approach {approach!r} m does not reach the surface (smallest gap "
                          f"{g0!r} m): no contact")
 
-    res = _solve_levels(g, grid.spacing, material.E_star, force, delta, tol, max_iter, initial)
-    K = normal_operator(grid.shape, grid.spacing, material.E_star)
+    E_star = pair.E_star
+    res = _solve_levels(g, grid.spacing, E_star, force, delta, tol, max_iter, initial)
+    K = normal_operator(grid.shape, grid.spacing, E_star)
     p = res.p
     u = K(p)
     contact = p > 0
@@ -479,8 +509,7 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
     if not residual < tol:
         # at the tolerance, or the displacement the iteration updated incrementally drifted
         # from a fresh product: polish from this pressure with a tighter tolerance
-        res = _solve_levels(g, grid.spacing, material.E_star, force, delta, 0.1 * tol,
-                            max_iter, p)
+        res = _solve_levels(g, grid.spacing, E_star, force, delta, 0.1 * tol, max_iter, p)
         p = res.p
         u = K(p)
         contact = p > 0
@@ -496,6 +525,9 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material, *,
             "the contact area reaches the edge of the window: use a larger window (more cells "
             "or a larger spacing) so that the contact is surrounded by free surface")
     total = float(p.sum() * grid.cell_area)
+    if coupled is not None:
+        u = u + coupled
     return NormalContact(pressure=p, displacement=u, contact=contact, gap=np.asarray(gap),
-                         grid=grid, material=material, approach=d + g0, force=total,
-                         iterations=res.iterations, residual=residual, converged=True)
+                         grid=grid, pair=pair, approach=d + g0, force=total,
+                         iterations=res.iterations, residual=residual, converged=True,
+                         traction=traction)

@@ -273,6 +273,59 @@ class TangentialOperator:
         return self._t.inverse(out)
 
 
+@cites("dcfft", _DCFFT)
+class CouplingOperator:
+    """The normal-tangential coupling on a ``(ny, nx)`` window of a contact pair.
+
+    ``normal(τ)``: u_z = K_zx * τ_x + K_zy * τ_y, the normal displacement (m, into the particle,
+    away from the plate) of shear tractions (2, ny, nx) in Pa; ``tangential(p)``: (u_x, u_y) =
+    -(K_zx * p, K_zy * p), the tangential displacement (m) of a pressure (Pa), by reciprocity
+    (K_xz = -K_zx). K_zx = β H_x/(πE*) (:func:`~thirdbody.bem.influence.coupling_integral`),
+    K_zy the same with x and y exchanged. Both blocks are odd in one direction, so their spectra
+    are imaginary; only the imaginary parts are stored. Obtain through :func:`coupling_operator`.
+    """
+
+    def __init__(self, shape: tuple[int, int], spacing: tuple[float, float], factor: float):
+        ny, nx = shape
+        dx, dy = spacing
+        self.shape, self.spacing, self.factor = (ny, nx), (dx, dy), factor
+        self._t = _Transform(ny, nx)
+
+        def blocks(X, Y):
+            return (factor * influence.coupling_integral(X, Y, dx / 2, dy / 2),
+                    factor * influence.coupling_integral(Y, X, dy / 2, dx / 2))
+
+        kzx, kzy = _tabulate(blocks, ny, nx, dy, dx, ((-1, 1), (1, -1)))
+        self.spectra = tuple(1j * np.ascontiguousarray(sfft.rfft2(k, workers=_workers).imag)
+                             for k in (kzx, kzy))
+
+    def normal(self, traction: np.ndarray) -> np.ndarray:
+        """Normal displacement (m, away from the plate) of the shear tractions (2, ny, nx)."""
+        sx, sy = self._t.forward(traction)
+        sx *= self.spectra[0]
+        sx += self.spectra[1] * sy
+        return self._t.inverse(sx)
+
+    def tangential(self, pressure: np.ndarray) -> np.ndarray:
+        """Tangential displacement (2, ny, nx), m, of a pressure field (ny, nx), Pa."""
+        spec = self._t.forward(pressure)
+        out = np.stack([-self.spectra[0] * spec, -self.spectra[1] * spec])
+        return self._t.inverse(out)
+
+
+@lru_cache(maxsize=32)
+def _coupling_cached(shape, spacing, factor) -> CouplingOperator:
+    return CouplingOperator(shape, spacing, factor)
+
+
+def coupling_operator(shape: tuple[int, int], spacing: tuple[float, float],
+                      factor: float) -> CouplingOperator:
+    """Cached :class:`CouplingOperator` for a ``(ny, nx)`` window of cells ``(dx, dy)`` (m);
+    ``factor`` is β/(πE*) (:attr:`~thirdbody.bem.pair.ElasticPair.coupling_modulus`)."""
+    return _coupling_cached(tuple(int(s) for s in shape), tuple(float(s) for s in spacing),
+                            float(factor))
+
+
 @lru_cache(maxsize=32)
 def _normal_cached(shape, spacing, E_star) -> NormalOperator:
     return NormalOperator(shape, spacing, E_star)

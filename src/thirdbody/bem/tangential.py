@@ -42,7 +42,7 @@ from scipy.fft import next_fast_len
 
 from .._citations import cites
 from .normal import ConvergenceError, NormalContact, _prolong, _restrict
-from .operator import tangential_operator
+from .operator import coupling_operator, tangential_operator
 
 _KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Contact. Kluwer; "
            "Vollebregt, E. A. H. (2014). J. Comput. Phys. 257, 333-351 (CG with FFT "
@@ -94,6 +94,10 @@ class TangentialContact:
         accumulated over the steps like ``shift`` (positive counter-clockwise seen from +z).
     twist_centre : (float, float)
         The point (m) the twist turns about.
+    coupling_passes : int
+        Normal-tangential passes of :func:`~thirdbody.bem.solve_coupled` (0: solved uncoupled).
+    coupling_changes : tuple of float
+        The relative change of the pressure or traction in each of those passes.
     """
 
     traction: np.ndarray
@@ -112,6 +116,8 @@ class TangentialContact:
     methods: tuple[str, ...] = ("kalker_tangcg", "lattice_symbol", "love1929", "dcfft")
     twist: float = 0.0
     twist_centre: tuple[float, float] = (0.0, 0.0)
+    coupling_passes: int = 0
+    coupling_changes: tuple[float, ...] = ()
 
     @property
     def stick_area(self) -> float:
@@ -372,6 +378,7 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
                      scalar: bool = False, max_outer: int = 60,
                      max_iter: int = 500, twist: float | None = None,
                      twist_centre: tuple[float, float] = (0.0, 0.0),
+                     coupling: bool = False, previous_pressure: np.ndarray | None = None,
                      _initial: np.ndarray | None = None,
                      ) -> TangentialContact:
     """Solve one incremental partial-slip step on top of a normal contact solution.
@@ -404,17 +411,27 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         step's (no increment). Its increment moves the plate by Δω (−(y − y_c), x − x_c) on
         top of the uniform shift; the moment it needs is :attr:`TangentialContact.moment`.
         Full sliding ignores it.
+    coupling : bool
+        Normal-tangential coupling: the pressure's change since the previous step moves the
+        surface tangentially, Δu = -(K_zx, K_zy) * (p − p_prev) (reciprocal to Cerruti's normal
+        displacement; zero when the pair's Dundurs β is 0), and that displacement enters the
+        slip like the plate's. Default False: Goodman's approximation.
+    previous_pressure : (ny, nx) array, optional
+        With ``coupling``: the previous step's pressure on this grid, Pa (default:
+        ``previous.normal.pressure``, or zero without ``previous``: the normal load was applied
+        in this step).
 
     Notes
     -----
-    Goodman approximation: the tangential tractions do not change the pressure (exact for
-    ν = 0.5, a few percent at ν = 0.3).
+    Without coupling (Goodman's approximation) the tangential tractions do not change the
+    pressure and the pressure does not move the surface tangentially: exact for ν = 0.5
+    against a rigid plate. :func:`thirdbody.bem.solve_coupled` alternates the two problems.
     """
     if not (np.isfinite(mu) and mu >= 0):
         raise ValueError(f"mu (friction coefficient) must be a finite number >= 0, got {mu!r}")
     if (force is None) == (shift is None):
         raise ValueError("give exactly one of force (N) and shift (m)")
-    grid, mat = normal.grid, normal.material
+    grid, mat = normal.grid, normal.pair
 
     def vec(v, name):
         a = np.zeros(2)
@@ -447,9 +464,26 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
             raise ValueError("scalar=True solves x-loading only: no twist")
         X, Y = grid.mesh()
         rigid = (twist - prev_twist) * np.stack([-(Y - centre[1]), X - centre[0]])
+    coupled = None          # tangential displacement of the whole pressure (with coupling)
+    if coupling and mat.coupled:
+        if scalar:
+            raise ValueError("scalar=True ignores u_y: no normal-tangential coupling")
+        if previous_pressure is None:
+            same = previous is not None and previous.normal.pressure.shape == grid.shape
+            previous_pressure = previous.normal.pressure if same else np.zeros(grid.shape)
+        previous_pressure = np.asarray(previous_pressure, dtype=float)
+        if previous_pressure.shape != grid.shape:
+            raise ValueError(f"previous_pressure has shape {previous_pressure.shape}, expected "
+                             f"{grid.shape}")
+        C = coupling_operator(grid.shape, grid.spacing, mat.coupling_modulus)
+        coupled = C.tangential(p)
+        # the pressure increment moves the surface like a rigid motion of the plate the other way
+        pressure_slip = -C.tangential(p - previous_pressure)
+        rigid = pressure_slip if rigid is None else rigid + pressure_slip
     K = tangential_operator(grid.shape, grid.spacing, mat.G, mat.nu)
     k0 = K.self_terms[0]
     spin = {"twist": twist, "twist_centre": centre}
+    couple = {"coupling": coupling, "previous_pressure": previous_pressure}
 
     if force is not None:
         Q = vec(force, "force")
@@ -462,12 +496,13 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
                 f"tangential force {Qn:.6g} N exceeds the friction limit mu*F_N = {cap:.6g} N "
                 f"(mu = {mu}, F_N = {FN:.6g} N): the contact slides")
         if Qn >= cap * (1 - 1e-12) and Qn > 0:
-            return replace(_full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K), **spin)
+            return replace(_full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K, rigid,
+                                         coupled), **spin)
         if cap == 0:
             # frictionless (μ = 0) and no force: no traction anywhere, every cell free to slip;
             # the plate's shift is undefined, so it does not move
             return _finish(normal, mu, np.zeros_like(tau0), tau0, np.zeros(2), prev_shift, K,
-                           k0, 0, tol, full=True, spin=spin)
+                           k0, 0, tol, full=True, spin=spin, coupled=coupled)
         ds_prescribed = None
     else:
         ds_prescribed = vec(shift, "shift") - prev_shift
@@ -498,7 +533,7 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
             dsv = ds_prescribed
         try:
             return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol,
-                           rigid=rigid, spin=spin)
+                           rigid=rigid, spin=spin, coupled=coupled)
         except ConvergenceError as exc:
             failure = str(exc)
     if Q is None:
@@ -507,11 +542,11 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     # cells or none (with ν > 0 the slip directions fan out, so every cell can slip while
     # |Q| < μF_N); find the shift that transmits Q with displacement-controlled solves
     return _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
-                           max_iter, failure, spin)
+                           max_iter, failure, spin, couple)
 
 
 def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer, max_iter,
-                    failure, spin):
+                    failure, spin, couple):
     """Force control by root finding on the shift increment: along e = Q/|Q| the transmitted
     force F(s e)·e increases monotonically with s (F is the gradient of a convex function of
     the shift), so it is bracketed and solved by the Illinois method; the perpendicular
@@ -528,13 +563,13 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         try:
             t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
                                  scalar=scalar, max_outer=max_outer, max_iter=max_iter,
-                                 _initial=warm[0], **spin)
+                                 _initial=warm[0], **spin, **couple)
         except ConvergenceError:
             if warm[0] is None:
                 raise
             t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
                                  scalar=scalar, max_outer=max_outer, max_iter=max_iter,
-                                 **spin)
+                                 **spin, **couple)
         warm[0] = t.traction
         iterations += t.iterations
         return t
@@ -544,8 +579,8 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
 
     # scale: the shift of full sliding along e (all cells slip once the plate has moved past
     # the furthest surface point)
-    K = tangential_operator(normal.grid.shape, normal.grid.spacing, normal.material.G,
-                            normal.material.nu)
+    K = tangential_operator(normal.grid.shape, normal.grid.spacing, normal.pair.G,
+                            normal.pair.nu)
     tau_full = mu * normal.pressure * e[:, None, None]
     tau_full[:, ~normal.contact] = 0.0
     tau0 = np.zeros_like(tau_full)
@@ -621,7 +656,7 @@ def _force_of(traction: np.ndarray, normal: NormalContact) -> np.ndarray:
 
 
 def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False,
-            rigid=None, spin=None):
+            rigid=None, spin=None, coupled=None):
     grid = normal.grid
     contact = normal.contact
     limit = mu * normal.pressure
@@ -638,20 +673,24 @@ def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=
     if not residual <= max(tol, 1e-14) * 10:
         raise ConvergenceError(f"tangential solver: Coulomb residual {residual:.3e} above "
                                f"tol {tol:.1e}")
+    displacement = K(tau) if coupled is None else K(tau) + coupled
     return TangentialContact(
-        traction=tau, displacement=K(tau), shift=prev_shift + ds,
+        traction=tau, displacement=displacement, shift=prev_shift + ds,
         force=tau.reshape(2, -1).sum(axis=1) * grid.cell_area, stick=stick, slip=slip,
         slip_increment=w, mu=float(mu), normal=normal, iterations=iterations,
         residual=residual, converged=True, full_sliding=bool(full or not stick.any()),
         **(spin or {}))
 
 
-def _full_sliding(normal, mu, e, tau0, prev_shift, K):
+def _full_sliding(normal, mu, e, tau0, prev_shift, K, rigid=None, coupled=None):
     """τ = μp e everywhere in contact. The shift is the smallest one consistent with every cell
     slipping along e: the plate has moved at least as far as the furthest surface point."""
     tau = mu * normal.pressure * e[:, None, None]
     tau[:, ~normal.contact] = 0.0
     du = K(tau - tau0)
+    if rigid is not None:
+        du = du - rigid
     along = (du * e[:, None, None]).sum(axis=0)[normal.contact].max()
     ds = e * along
-    return _finish(normal, mu, tau, tau0, ds, prev_shift, K, K.self_terms[0], 0, 1.0, full=True)
+    return _finish(normal, mu, tau, tau0, ds, prev_shift, K, K.self_terms[0], 0, 1.0, full=True,
+                   rigid=rigid, coupled=coupled)

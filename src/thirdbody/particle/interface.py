@@ -23,6 +23,7 @@ from scipy import ndimage
 
 from ..bem import (
     ContactAtEdgeError,
+    ElasticPair,
     Grid,
     NormalContact,
     TangentialContact,
@@ -129,6 +130,7 @@ class Interface:
         if side not in ("lower", "upper"):
             raise ValueError(f"side must be 'lower' or 'upper', got {side!r}")
         self.side, self.material = side, material
+        self.pair = ElasticPair.rigid_plate(material)
         self.index = LOWER if side == "lower" else UPPER
         self.spacing, self.tol = float(spacing), tol
         self.last: InterfaceNormal | None = None
@@ -147,10 +149,13 @@ class Interface:
         hertz = (9 * force**2 / (16 * self.material.E_star**2 * radius)) ** (1 / 3)
         return max(2.0 * hertz, floor)
 
-    def solve_normal(self, surfaces: Surfaces, *, force: float) -> InterfaceNormal:
+    def solve_normal(self, surfaces: Surfaces, *, force: float,
+                     traction: tuple[Window, np.ndarray] | None = None) -> InterfaceNormal:
         """Frictionless normal contact at the orientation of ``surfaces`` under ``force`` (N);
         warm-started from the last solve at the same orientation. Every spot the plate can
-        reach is in the problem (module docstring)."""
+        reach is in the problem (module docstring). ``traction``: with normal-tangential
+        coupling, the shear tractions (Pa) on their window whose normal displacement the
+        pressure must make room for."""
         n = surfaces.n
         orientation = key(surfaces.rotation)
         bound = self._bound(surfaces, force)
@@ -169,9 +174,10 @@ class Interface:
                 initial = remap(warm[1], warm[0], window)
                 if not initial.any():
                     initial = None
+            shear = None if traction is None else remap(traction[1], traction[0], window)
             try:
-                normal = solve_normal(gap, grid, self.material, force=force, tol=self.tol,
-                                      initial=initial)
+                normal = solve_normal(gap, grid, self.pair, force=force, tol=self.tol,
+                                      initial=initial, traction=shear)
             except ContactAtEdgeError:
                 # the window holds the whole footprint with free cells around it: only a
                 # contact over the whole particle (an approach beyond its size) gets there
@@ -207,18 +213,25 @@ class Interface:
 
     def solve_tangential(self, solution: InterfaceNormal, mu: float, force: tuple[float, float],
                          previous: tuple[Window, TangentialContact] | None = None,
-                         twist: float | None = None) -> TangentialContact:
+                         twist: float | None = None, coupling: bool = False,
+                         _initial: np.ndarray | None = None) -> TangentialContact:
         """Partial-slip solve with the prescribed tangential force (N, on the particle) at this
         interface, carrying the history of ``previous`` (its window and its step) when given.
         ``twist``: the plate's total rotation about the particle's vertical axis, rad (default:
-        the previous step's)."""
+        the previous step's). ``coupling``: the pressure's change since ``previous`` (from zero
+        without it) moves the surface tangentially (:func:`~thirdbody.bem.solve_tangential`)."""
         prev = None
+        pressure = np.zeros(solution.window.ny * solution.window.nx).reshape(
+            solution.window.ny, solution.window.nx)
         if previous is not None:
             p_window, p_step = previous
             traction = remap(p_step.traction, p_window, solution.window)
             prev = replace(p_step, traction=traction)
+            pressure = remap(p_step.normal.pressure, p_window, solution.window)
         return solve_tangential(solution.contact, mu, force=np.asarray(force, dtype=float),
-                                previous=prev, tol=self.tol, twist=twist)
+                                previous=prev, tol=self.tol, twist=twist, coupling=coupling,
+                                previous_pressure=pressure if coupling else None,
+                                _initial=_initial)
 
 
 def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,

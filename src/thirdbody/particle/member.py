@@ -87,10 +87,17 @@ class Member:
     """
 
     def __init__(self, particle: Particle, plates: Plates, cell_size: float, tol: float,
-                 twist_tol: float) -> None:
+                 twist_tol: float, coupling: bool = False) -> None:
         self.particle, self.plates = particle, plates
         self.cell_size, self.tol, self.twist_tol = cell_size, tol, twist_tol
-        self.statics = PairStatics(particle.shape, particle.material, cell_size, tol)
+        self.statics = PairStatics(particle.shape, particle.material, cell_size, tol,
+                                   coupling=coupling)
+        self.coupling = self.statics.coupling
+        #: (orientation key, tangential history) the coupled evaluations load from: the
+        #: particle's state at the start of the step (:meth:`begin_step`)
+        self.shear_history: tuple[tuple | None, dict] = (None, {})
+        if self.coupling:
+            self.statics.shear_solver = self._shear
         self.d0 = particle.shape.height(particle.orientation)
         self.points: list[tuple[float, float]] = []
         self._points_key: tuple | None = None
@@ -150,28 +157,49 @@ class Member:
         return self.compliance(rotation).force_at(gap)
 
     # --- tangential ----------------------------------------------------------------------------
-    def tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
-        """Partial slip at both plates with the forces ±F'; if the tractions leave a twisting
-        moment about z above ``twist_tol`` (relative to max(μ) F_N a), the particle's twist
-        relative to the plates becomes an unknown, found by Illinois iterations on the total
-        moment (monotone in the twist)."""
-        # the plates can transmit at most μ_min F_N; only a balanced turn ends beyond it
+    def begin_step(self, state: ParticleState) -> None:
+        """Coupled evaluations in this step load from ``state``'s tangential history (at its
+        orientation; elsewhere the contact is new and loads from zero)."""
+        self.shear_history = (key(state.rotation), state.history)
+
+    def _sides(self, ev: Evaluation):
+        """(side, interface normal, sign of F', μ) of both plates, and F' capped at
+        μ_min F_N (the plates can transmit no more; only a balanced turn ends beyond it)."""
         cap = self.plates.mu_min * ev.force
         demand = ev.demand_force
         norm = math.hypot(*demand)
         if norm > cap:
             demand = demand * (cap / norm) if norm > 0 else demand
         sides = (("low", ev.low, 1.0, self.plates.mu_low), ("up", ev.up, -1.0, self.plates.mu_up))
+        return sides, demand
+
+    def _solve_sides(self, ev: Evaluation, history: dict,
+                     twist: float | None) -> dict[str, TangentialContact]:
+        sides, demand = self._sides(ev)
+        out = {}
+        for side, sol, sign, mu in sides:
+            force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
+            out[side] = self.interfaces[side].solve_tangential(
+                sol, mu, force, history.get(side), twist=twist, coupling=self.coupling)
+        return out
+
+    def _shear(self, ev: Evaluation) -> dict[str, TangentialContact]:
+        """The tangential steps a coupled evaluation is solved with (no history written)."""
+        orientation, history = self.shear_history
+        return self._solve_sides(ev, history if orientation == key(ev.rotation) else {}, None)
+
+    def tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
+        """Partial slip at both plates with the forces ±F'; if the tractions leave a twisting
+        moment about z above ``twist_tol`` (relative to max(μ) F_N a), the particle's twist
+        relative to the plates becomes an unknown, found by Illinois iterations on the total
+        moment (monotone in the twist)."""
+        sides, _ = self._sides(ev)
 
         def solve(twist: float | None) -> dict[str, TangentialContact]:
-            out = {}
-            for side, sol, sign, mu in sides:
-                force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
-                out[side] = self.interfaces[side].solve_tangential(
-                    sol, mu, force, state.history.get(side), twist=twist)
-            return out
+            return self._solve_sides(ev, state.history, twist)
 
-        out = solve(None)
+        # a coupled evaluation already solved them, with this history (or none, after a turn)
+        out = dict(ev.shear) if ev.shear is not None else solve(None)
         mu_max = max(self.plates.mu_up, self.plates.mu_low)
         radius = math.sqrt(max(ev.up.contact.area, ev.low.contact.area) / math.pi)
         scale = mu_max * ev.force * radius

@@ -21,7 +21,8 @@ from __future__ import annotations
 import math
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -29,7 +30,7 @@ from ..loading import LoadStep
 from ..material import Material
 from ..orientation import Rotation, key
 from ..shapes import Shape
-from .interface import Interface, InterfaceNormal
+from .interface import Interface, InterfaceNormal, remap
 from .surface import Surfaces, scan_stride
 
 __all__ = ["Evaluation", "PairStatics", "StaticsError"]
@@ -59,6 +60,11 @@ class Evaluation:
     demand_force : (2,) array
         F' = F_N (r̄_up − r̄_low)/h, N: the force of the lower plate on the particle that keeps
         it from turning.
+    shear : dict or None
+        With normal-tangential coupling: the tangential steps at both plates ("up", "low")
+        under ±F' (capped at μ_min F_N) that the pressures were solved with; None uncoupled.
+    coupling_passes : int
+        Normal-tangential passes of the coupled evaluation (0 uncoupled).
     """
 
     rotation: Rotation
@@ -67,6 +73,8 @@ class Evaluation:
     up: InterfaceNormal | None
     low: InterfaceNormal | None
     demand_force: np.ndarray
+    shear: dict | None = None
+    coupling_passes: int = 0
 
     @classmethod
     def unloaded(cls, rotation: Rotation) -> Evaluation:
@@ -112,10 +120,22 @@ class PairStatics:
         Cell size Δ, m.
     tol : float
         Normal solver tolerance.
+    coupling : bool
+        Normal-tangential coupling (ν < 0.5): each evaluation alternates the normal solves at
+        both plates with the tangential solves under the demand they imply (``shear_solver``,
+        set by the particle that owns the statics), until the pressures and F' stop changing.
     """
 
-    def __init__(self, shape: Shape, material: Material, spacing: float, tol: float) -> None:
+    #: relative change of the pressures and of F'/F_N that ends the coupled passes
+    COUPLING_TOL = 1e-6
+    #: budget of coupled passes per evaluation
+    COUPLING_PASSES = 40
+
+    def __init__(self, shape: Shape, material: Material, spacing: float, tol: float,
+                 coupling: bool = False) -> None:
         self.shape, self.material, self.spacing, self.tol = shape, material, spacing, tol
+        self.coupling = bool(coupling) and (1.0 - 2.0 * material.nu) != 0.0
+        self.shear_solver: Callable[[Evaluation], dict] | None = None
         self.interfaces = {"up": Interface("upper", material, spacing, tol),
                            "low": Interface("lower", material, spacing, tol)}
         self.stride = scan_stride(shape, spacing)
@@ -158,7 +178,40 @@ class PairStatics:
         up = self.interfaces["up"].solve_normal(surfaces, force=force)
         low = self.interfaces["low"].solve_normal(surfaces, force=force)
         self.normal_time += time.perf_counter() - start - (self.geometry_time - geometry)
-        return self._evaluation(rotation, force, up, low)
+        ev = self._evaluation(rotation, force, up, low)
+        if self.coupling and self.shear_solver is not None:
+            ev = self._coupled(ev, surfaces)
+        return ev
+
+    def _coupled(self, ev: Evaluation, surfaces: Surfaces) -> Evaluation:
+        """The Panagiotopoulos passes of one evaluation (see
+        :func:`thirdbody.bem.solve_coupled`): shear under the current demand, then both
+        normal solves with that shear, until the pressures change by less than
+        ``COUPLING_TOL`` of their maximum and F'/F_N by less than ``COUPLING_TOL``."""
+        from ..bem import ConvergenceError
+
+        change = math.inf
+        for passes in range(1, self.COUPLING_PASSES + 1):
+            shear = self.shear_solver(ev)
+            geometry = self.geometry_time
+            start = time.perf_counter()
+            sols = {side: self.interfaces[side].solve_normal(
+                surfaces, force=ev.force, traction=(getattr(ev, side).window,
+                                                    shear[side].traction))
+                for side in ("up", "low")}
+            self.normal_time += time.perf_counter() - start - (self.geometry_time - geometry)
+            new = self._evaluation(ev.rotation, ev.force, sols["up"], sols["low"])
+            change = float(np.abs(new.demand_force - ev.demand_force).max()) / ev.force
+            for side in ("up", "low"):
+                a, b = getattr(new, side), getattr(ev, side)
+                p_old = remap(b.contact.pressure, b.window, a.window)
+                change = max(change, float(np.abs(a.contact.pressure - p_old).max())
+                             / float(a.contact.pressure.max()))
+            ev = new
+            if change <= self.COUPLING_TOL:
+                return replace(ev, shear=self.shear_solver(ev), coupling_passes=passes)
+        raise ConvergenceError(f"normal-tangential coupling of the particle did not converge "
+                               f"in {self.COUPLING_PASSES} passes (last change {change:.1e})")
 
     def _evaluation(self, rotation: Rotation, force: float, up: InterfaceNormal,
                     low: InterfaceNormal) -> Evaluation:

@@ -1,0 +1,127 @@
+"""Cost of normal-tangential coupling: one coupled load step against the uncoupled one.
+
+Cases of ``normal_contact.py`` (circle, long ellipse, two spots, rough sphere), ν = 0.3
+(β = 0.29), μ = 0.3, on N x N cells. Each case is loaded as a history: W = 0.9 N, then W = 1 N
+(both with Q = 0), then the measured steps from that state:
+
+* ``normal``: W from 0.9 N to 1 N with Q = 0 (Spence's inward slip under a growing load);
+* ``shear``: Q = 0.5 μW along x at W = 1 N (a Cattaneo step).
+
+Uncoupled means :func:`solve_normal` then :func:`solve_tangential` with the previous step's
+history, as the particle runs them; coupled means :func:`solve_coupled` (Panagiotopoulos passes).
+Times are the best of 3 in this process, one thread; the ratio is what to read. Residuals are
+recomputed here from the fields: the normal complementarity of the coupled gap
+g + K_zz p + K_zt τ − δ, and |ΣτΔA − Q|/Q.
+
+    python benchmarks/coupling.py [--sizes 128 256] [--cases ...] [--out benchmarks/results]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "THIRDBODY_WORKERS"):
+    os.environ[_var] = "1"
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+import numpy as np  # noqa: E402
+
+import thirdbody as tb  # noqa: E402
+from normal_contact import E_YOUNG, NU, make_problem  # noqa: E402
+from thirdbody.bem import (  # noqa: E402
+    ElasticPair,
+    coupling_operator,
+    normal_operator,
+    solve_coupled,
+)
+
+MU = 0.3
+REPEAT = 3
+
+
+def _uncoupled(gap, grid, mat, force, q, previous):
+    normal = tb.solve_normal(gap, grid, mat, force=force,
+                             initial=None if previous is None else previous.normal.pressure)
+    return tb.solve_tangential(normal, MU, force=(q, 0.0), previous=previous)
+
+
+def _coupled(gap, grid, mat, force, q, previous):
+    return solve_coupled(gap, grid, mat, MU, force=force, tangential_force=(q, 0.0),
+                         previous=previous)
+
+
+def _residual(step, gap, pair) -> float:
+    """Normal complementarity of the coupled problem, from the fields, relative to max u."""
+    n = step.normal
+    grid = n.grid
+    u = normal_operator(grid.shape, grid.spacing, pair.E_star)(n.pressure)
+    u = u + coupling_operator(grid.shape, grid.spacing, pair.coupling_modulus).normal(
+        step.traction)
+    s = np.where(np.isfinite(gap), gap, 1.0) + u - n.approach
+    inside = np.abs(s[n.contact]).max()
+    outside = np.maximum(-s[~n.contact], 0).max()
+    return float(max(inside, outside) / np.abs(u).max())
+
+
+def _best(fn, *args):
+    best, out = np.inf, None
+    for _ in range(REPEAT):
+        t0 = time.perf_counter()
+        out = fn(*args)
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[128, 256])
+    ap.add_argument("--cases", nargs="+", default=["circle", "ellipse10", "two_spots", "rough"])
+    ap.add_argument("--out", type=Path, default=None, help="write coupling.md here")
+    args = ap.parse_args(argv)
+    mat = tb.Material(E_YOUNG, NU)
+    pair = ElasticPair.rigid_plate(mat)
+    rows = []
+    head = ("| case | N | step | uncoupled s | coupled s | ratio | passes | coupled residual "
+            "| shift of x̄ / a |\n|---|---|---|---|---|---|---|---|---|")
+    print(head)
+    for case in args.cases:
+        for n in args.sizes:
+            prob = make_problem(case, n)
+            grid = tb.Grid(n, prob["h"])
+            gap = prob["gap"]
+            for name, fn in (("u", _uncoupled), ("c", _coupled)):
+                first = fn(gap, grid, mat, 0.9, 0.0, None)
+                base = fn(gap, grid, mat, 1.0, 0.0, first)
+                if name == "u":
+                    u_first, u_base = first, base
+                else:
+                    c_first, c_base = first, base
+            for label, force, q, (u_prev, c_prev) in (
+                    ("normal", 1.0, 0.0, (u_first, c_first)),
+                    ("shear", 1.0, 0.5 * MU, (u_base, c_base))):
+                t_u, u = _best(_uncoupled, gap, grid, mat, force, q, u_prev)
+                t_c, c = _best(_coupled, gap, grid, mat, force, q, c_prev)
+                X, _ = grid.mesh()
+                a = np.sqrt(c.normal.area / np.pi)
+                shift = ((c.normal.pressure * X).sum() / c.normal.pressure.sum()
+                         - (u.normal.pressure * X).sum() / u.normal.pressure.sum()) / a
+                line = (f"| {case} | {n} | {label} | {t_u:.3f} | {t_c:.3f} | {t_c / t_u:.1f} "
+                        f"| {c.coupling_passes} | {_residual(c, gap, pair):.1e} | {shift:+.4f} |")
+                print(line, flush=True)
+                rows.append(line)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        text = (f"# Coupled step against uncoupled step\n\n`python benchmarks/coupling.py "
+                f"--sizes {' '.join(map(str, args.sizes))}`; ν = {NU}, μ = {MU}, one thread, best "
+                f"of {REPEAT}.\n\n{head}\n" + "\n".join(rows) + "\n")
+        (args.out / "coupling.md").write_text(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
