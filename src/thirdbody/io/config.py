@@ -207,8 +207,8 @@ class Numerics(_Model):
                                       "relative to max(mu) F_N a")] = 1e-3
     workers: Annotated[int, Field(ge=1, le=256, description="processes turning the particles "
                                   "of a layer in parallel")] = 1
-    coupling: Annotated[bool, Field(description="normal-tangential coupling (nu < 0.5); "
-                                    "default off: Goodman's approximation")] = False
+    coupling: Annotated[bool, Field(strict=True, description="normal-tangential coupling "
+                                    "(nu < 0.5); default off: Goodman's approximation")] = False
 
 
 _MATERIAL_KEYS = ("E", "nu", "orientation_deg", "tilt_axis_deg", "yaw_deg", "quaternion")
