@@ -15,13 +15,18 @@ from thirdbody.bem import (
     solve_tangential,
 )
 from thirdbody.material import Material
-from thirdbody.reference import hertz
+from thirdbody.reference import hertz, spence
 
 E, R = 1.0e9, 0.01
 SPENCE_MU = 0.2986          # CONTACT's spence35 example: ν = 0, β = 0.5
-# CONTACT user guide, spence35: c/a = 0.5 (a published reference; reference.spence neglects the
-# shear's effect on the pressure and gives 0.62, see the issue note)
+# CONTACT user guide, spence35: c/a = 0.5, centre pressure 1.31 x Hertz (published cross-check)
 CONTACT_STICK_RATIO = 0.5
+
+
+@pytest.fixture(scope="module")
+def spence_reference() -> spence.SpenceSolution:
+    """The axisymmetric ring-element solution of Spence's problem (independent of the FFT code)."""
+    return spence.solve(0.5, SPENCE_MU)
 
 
 # --- the pair ------------------------------------------------------------------------------------
@@ -114,12 +119,13 @@ def _stick_ratio(step) -> float:
     return float(np.sqrt(step.stick_area / step.normal.area))
 
 
-def test_spence_stick_radius_is_a_fixed_fraction_of_the_contact_radius():
+def test_spence_stick_radius_is_a_fixed_fraction_of_the_contact_radius(spence_reference):
     """A rigid flat on a sphere with ν = 0 (β = 0.5), μ = 0.2986, under a growing normal load in
     16 stages: the stick zone stays at Spence's fraction of the contact at every stage, the
     central pressure is CONTACT's 1.31 x Hertz, and the slip is inward, so the friction on the
     particle points outward."""
-    reference = CONTACT_STICK_RATIO
+    reference = spence_reference.stick_ratio
+    assert reference == pytest.approx(CONTACT_STICK_RATIO, abs=0.005)
     mat, grid, steps = _spence(48, 16)
     ratios = [_stick_ratio(s) for s in steps]
     # the discrete stick zone of a few hundred cells: a cell row is ~1/17 of the radius at the
@@ -131,29 +137,32 @@ def test_spence_stick_radius_is_a_fixed_fraction_of_the_contact_radius():
         assert np.abs(s.force).max() < 1e-9 * s.normal.force     # no net shear
     last = steps[-1]
     p_hertz = hertz.sphere(last.normal.force, R, mat.E_star).peak_pressure
-    assert last.normal.pressure.max() / p_hertz == pytest.approx(1.31, abs=0.02)
+    assert last.normal.pressure.max() / p_hertz == pytest.approx(
+        spence_reference.centre_pressure_ratio, abs=0.02)
     X, Y = grid.mesh()
     radial = (last.traction[0] * X + last.traction[1] * Y) / np.hypot(X, Y).clip(1e-30)
     assert (radial[last.slip] > 0).all()
 
 
-def test_spence_needs_the_load_in_stages():
+def test_spence_needs_the_load_in_stages(spence_reference):
     """Applied in one stage the same final load leaves a stick zone far smaller than Spence's."""
-    reference = CONTACT_STICK_RATIO
+    reference = spence_reference.stick_ratio
     _, _, one = _spence(48, 1)
     assert _stick_ratio(one[-1]) < reference - 0.15
 
 
-@pytest.mark.slow
-def test_spence_stick_ratio_converges_with_the_grid():
-    reference = CONTACT_STICK_RATIO
+def test_spence_stick_ratio_converges_with_the_grid(spence_reference):
+    """c/a (mean over the last half of 32 stages) approaches the ring-element reference as the
+    grid refines. At 96² this also guards the tangential active set against a stick/slip set
+    that cycles with period two (it used to raise ConvergenceError at the coarse predictor)."""
+    reference = spence_reference.stick_ratio
     errors = []
     for n in (24, 48, 96):
-        _, _, steps = _spence(n, 16)
+        _, _, steps = _spence(n, 32)
         # mean over the last half of the stages: the discrete zone jumps by whole cells
-        errors.append(abs(np.mean([_stick_ratio(s) for s in steps[8:]]) - reference))
+        errors.append(abs(np.mean([_stick_ratio(s) for s in steps[16:]]) - reference))
     assert errors[2] < errors[0]
-    assert errors[2] < 0.01
+    assert errors[2] < 0.003, errors
 
 
 def test_coupled_cattaneo_moves_the_pressure_backwards():
@@ -234,7 +243,7 @@ def test_coupling_raises_the_tilted_ellipsoids_demand_and_turns_with_the_problem
     assert np.abs(g[:, 0]).max() < 3e-3 * np.abs(f[:, 0]).max()
 
 
-def test_an_upright_sphere_between_the_plates_follows_spence():
+def test_an_upright_sphere_between_the_plates_follows_spence(spence_reference):
     """The particle end to end: an upright sphere (ν = 0, β = 0.5) between plates with
     μ = 0.2986 under a normal load growing in 12 steps. By symmetry F' = 0, so all that acts is
     Spence's inward slip: at both plates the stick zone is Spence's fraction of the contact."""
@@ -244,7 +253,7 @@ def test_an_upright_sphere_between_the_plates_follows_spence():
                         tb.Plates(SPENCE_MU), tb.LinearRamp(stop=4.0, steps=10),
                         resolution=120, maps_every=0, coupling=True)
     ds = sim.run()
-    reference = CONTACT_STICK_RATIO
+    reference = spence_reference.stick_ratio
     ratio = np.sqrt(ds.stick_area.values / ds.contact_area.values)      # (step, interface)
     # the first step loads from zero in one stage: Spence's ratio needs the stages
     assert (ratio[0] < reference - 0.15).all()

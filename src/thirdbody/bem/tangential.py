@@ -204,7 +204,8 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
     # curvature of |τ| = μp (the slip multiplier |w|/(μp)): the Newton term on rotations
     curvature = np.zeros(contact.shape)
 
-    seen: list[np.ndarray] = []         # the slip sets of the last two outer iterations
+    # slip sets visited since the last CG step; a return to one of them is a cycle
+    seen: set[bytes] = set()
     for _outer in range(max_outer):
         iterations_before = iterations
         # the admissible variations V: stick cells move freely, slip cells only rotate on their
@@ -311,11 +312,13 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
                   "turned", turned, "its", iterations)
         changing = bool(to_slip.any() or to_stick.any())
         # a cell on the stick/slip boundary can flip back and forth with no CG step in between
-        # (the residual is already below the target; seen in Spence's problem at 96²): when the
-        # sets return to those of two outer iterations ago, test Coulomb's law as it stands
-        cycling = changing and iterations == iterations_before and len(seen) == 2 and \
-            np.array_equal(seen[0], (slip & ~to_stick) | to_slip)
-        seen = [*seen[-1:], slip.copy()]
+        # (the residual is already below the target; seen in Spence's problem at 48² and 96²):
+        # when the sets return to one visited since the last CG step, test Coulomb's law as it
+        # stands
+        if iterations != iterations_before:
+            seen = set()
+        seen.add(slip.tobytes())
+        cycling = changing and ((slip & ~to_stick) | to_slip).tobytes() in seen
         if (not changing or cycling) and turned <= inner_tol:
             if inner_tol <= tol:
                 tau_f = np.where(slip, limit * unit, tau)
