@@ -118,9 +118,6 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
     pair = pair if isinstance(pair, ElasticPair) else ElasticPair.rigid_plate(pair)
     tangential = {"force": tangential_force, "shift": shift, "previous": previous,
                   "twist": twist, "twist_centre": twist_centre}
-    if previous is not None and previous_pressure is None \
-            and previous.normal.pressure.shape == grid.shape:
-        previous_pressure = previous.normal.pressure
     tau = None if previous is None else np.where(previous.normal.contact, previous.traction, 0.0)
     p_guess = initial
     tau_guess = None
