@@ -34,7 +34,7 @@ from .layer import Layer, LayerError, PlacedParticle
 from .loading import ForceTable, GapRamp, HoldThenRamp, LinearRamp
 from .material import Material
 from .particle import Particle, Plates
-from .simulation import Simulation, SimulationError
+from .simulation import Simulation, SimulationError, SimulationStoppedWarning
 
 __all__ = [
     "ContactAtEdgeError",
@@ -54,6 +54,7 @@ __all__ = [
     "Plates",
     "Simulation",
     "SimulationError",
+    "SimulationStoppedWarning",
     "TangentialContact",
     "__version__",
     "citations",

@@ -50,8 +50,7 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
     import warnings
 
     from .io import ConfigError, load_config, run_to_file
-    from .records import orientation_label
-    from .simulation import Simulation, SimulationError
+    from .simulation import Simulation, SimulationError, SimulationStoppedWarning
 
     try:
         cfg = load_config(config)
@@ -84,18 +83,11 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         task = bar.add_task("starting", total=n)
 
         def progress(r) -> None:
-            if sim.single:
-                text = (f"step {r.step}: F_N {r.normal_force:.4g} N, {r.state}, "
-                        f"{orientation_label(r)}, F_T/μF_N {r.ratio[1]:.3f}")
-            else:
-                text = (f"step {r.step}: F_N {r.total_force:.4g} N, {r.loaded} loaded: "
-                        f"{r.fraction_stick:.0%} stick, {r.fraction_roll:.0%} roll, "
-                        f"{r.fraction_rotate:.0%} rotate")
-            bar.update(task, completed=r.step + 1, description=text)
+            bar.update(task, completed=r.step + 1, description=str(r))
 
         try:
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
+                warnings.simplefilter("ignore", SimulationStoppedWarning)
                 ds = run_to_file(sim, results, resume=resume, progress=progress,
                                  attrs={"config": cfg.to_toml()})
         except KeyboardInterrupt:
@@ -135,6 +127,7 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
     OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases."""
     import warnings
 
+    from .simulation import SimulationStoppedWarning
     from .sweep import SweepError, _case_status, load_sweep, run_sweep
 
     if scheduler and workers:
@@ -171,7 +164,7 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
 
         try:
             with warnings.catch_warnings():
-                warnings.simplefilter("ignore", RuntimeWarning)
+                warnings.simplefilter("ignore", SimulationStoppedWarning)
                 report = run_sweep(spec, out, scheduler=scheduler, workers=workers,
                                    plots=plots, progress=progress,
                                    connect_timeout=connect_timeout, cases=cases)

@@ -70,14 +70,9 @@ def _planar(ds) -> bool:
 def _signed(ds) -> np.ndarray:
     """+1/−1 per step: the side on which the lower plate pushes, relative to the first
     non-zero F' of the run (for the paper's case, the sign of F'_x at the start)."""
-    f = ds.tangential_force.transpose("step", "component").values
-    norms = np.hypot(f[:, 0], f[:, 1])
-    first = np.flatnonzero(norms > 0)
-    if not first.size:
-        return np.ones(len(f))
-    ref = f[first[0]] / norms[first[0]]
-    sign = np.sign(f @ ref)
-    return np.where(sign == 0, 1.0, sign)
+    from .records import direction_sign
+
+    return direction_sign(ds.tangential_force.transpose("step", "component").values)
 
 
 def state_curve(ds, labels: dict[int, str] | None = None):
@@ -113,7 +108,7 @@ def state_curve(ds, labels: dict[int, str] | None = None):
         ax.annotate(text, (c[k], ratio["lower"][k] * sign[k]), textcoords="offset points",
                     xytext=(4, 6), fontsize=11, fontweight="bold")
     ax.set_xlabel("compression (d₀ − h)/d₀")
-    ax.set_ylabel("F_T / (μ F_N)")
+    ax.set_ylabel("± F_T / (μ F_N)   (−: F' against its first direction)")
     ax.set_ylim(min(-0.2, float(np.nanmin(ax.get_ylim()))), top)
     ax.set_xlim(0, float(c.max()) * 1.02 if c.size else 1)
     ax.legend(fontsize=8, loc="lower right")

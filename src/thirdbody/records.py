@@ -19,8 +19,8 @@ import numpy as np
 from ._version import __version__
 
 __all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES", "LayerRecord",
-           "StepMaps", "StepRecord", "Variable", "layer_dataset", "orientation_label",
-           "to_dataset"]
+           "StepMaps", "StepRecord", "Variable", "direction_sign", "layer_dataset",
+           "orientation_label", "to_dataset"]
 
 #: State codes stored in the results (``state`` variable, with ``flag_values``/``flag_meanings``).
 STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
@@ -45,7 +45,7 @@ def _v(name: str, dims: str, units: str, long_name: str) -> Variable:
 
 #: every per-step variable (the record's fields are exactly these names)
 VARIABLES: tuple[Variable, ...] = (
-    _v("load_value", "", "N or 1", "prescribed load: F_N (N) or compression ratio (1)"),
+    _v("load_value", "", "N", "prescribed load: F_N (N) or compression ratio (1), see load_kind"),
     _v("normal_force", "", "N", "normal force F_N on each plate"),
     _v("plate_gap", "", "m", "plate separation h"),
     _v("compression", "", "1", "compression ratio (d0 - h) / d0"),
@@ -67,7 +67,9 @@ VARIABLES: tuple[Variable, ...] = (
     _v("tangential_force", "component", "N",
        "F' = F_N (r_up - r_low) / h: force of the lower plate on the particle"),
     _v("demand_ratio", "interface", "1", "|F'| / (mu F_N) at the step's starting orientation"),
-    _v("ratio", "interface", "1", "F_T / (mu F_N) at the final orientation"),
+    _v("ratio", "interface", "1",
+       "|F_T| / (mu F_N) at the final orientation: a magnitude, >= 0 (the state plot and the "
+       "sweep summary sign it by the direction of F' against its first non-zero direction)"),
     _v("centroid", "interface component", "m", "pressure centroid (particle frame)"),
     _v("approach", "interface", "m", "approach of the plate from its first contact with the "
                                      "surface cells"),
@@ -152,6 +154,13 @@ class StepRecord(_Values):
             raise ValueError(f"record fields do not match the table: missing {sorted(missing)}, "
                              f"unknown {sorted(extra)}")
 
+    def __str__(self) -> str:
+        """One line for progress output (``sim.run(progress=print)``): the step, F_N (N), the
+        state, the orientation and |F_T|/(μ_low F_N); the full record is ``repr``."""
+        return (f"step {self.step}: F_N {self.values['normal_force']:.4g} N, "
+                f"{self.values['state']}, {orientation_label(self)}, "
+                f"F_T/μF_N {self.values['ratio'][1]:.3f}")
+
 
 
 def orientation_label(record: StepRecord) -> str:
@@ -195,6 +204,35 @@ def _place(field: np.ndarray, window: tuple[int, int, int, int],
     return out
 
 
+def direction_sign(tangential_force: np.ndarray) -> np.ndarray:
+    """+1/−1 per step: whether F' (steps, 2; N) points along its first non-zero direction of the
+    run (+1) or against it (−1); +1 where F' is zero or at right angles to it.
+
+    The state plot and the sweep summary sign ``ratio`` (a magnitude) with it, so that a run
+    whose lower plate ends up pushing the other way shows a negative ratio in both."""
+    f = np.asarray(tangential_force, dtype=float).reshape(-1, 2)
+    norms = np.hypot(f[:, 0], f[:, 1])
+    first = np.flatnonzero(norms > 0)
+    if not first.size:
+        return np.ones(len(f))
+    sign = np.sign(f @ (f[first[0]] / norms[first[0]]))
+    return np.where(sign == 0, 1.0, sign)
+
+
+_STEP_ATTRS = {"units": "1", "long_name": "load step index (from 0)"}
+_MAP_STEP_ATTRS = {"units": "1", "long_name": "load step index of the stored maps"}
+_LOAD_KIND_ATTRS = {"units": "1", "long_name": "load control: force (load_value in N) or "
+                                               "compression (load_value a ratio)"}
+
+
+def _load_value_attrs(records) -> dict:
+    """units and long_name of ``load_value``: N under force control, 1 under compression
+    control (a load program is one or the other)."""
+    if records and all(r.load_kind == "compression" for r in records):
+        return {"units": "1", "long_name": "prescribed compression ratio (d0 - h) / d0"}
+    return {"units": "N", "long_name": "prescribed normal force F_N"}
+
+
 def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float,
                inputs: dict, status: str, attrs: dict | None = None):
     """Assemble the results: per-step variables along ``step`` (and their own dimensions),
@@ -217,8 +255,9 @@ def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float
             arr = np.array(values, dtype=dtype).reshape(shape)
         data[var.name] = (("step", *var.dims), arr, attrs_v)
     data["load_kind"] = ("step", np.array([r.load_kind for r in records], dtype=str),
-                         {"long_name": "load control: force or compression"})
-    coords: dict[str, Any] = {"step": ("step", steps, {"long_name": "load step index"})}
+                         _LOAD_KIND_ATTRS)
+    data["load_value"][2].update(_load_value_attrs(records))
+    coords: dict[str, Any] = {"step": ("step", steps, _STEP_ATTRS)}
     used = {d for v in VARIABLES for d in v.dims}
     if maps:
         used |= {"interface", "component"}
@@ -228,7 +267,7 @@ def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float
         frame = _union(maps)
         i0, j0, nx, ny = frame
         coords["map_step"] = ("map_step", np.array([m.step for m in maps], dtype=int),
-                              {"long_name": "load step of the stored maps"})
+                              _MAP_STEP_ATTRS)
         coords["map_x"] = ("map_x", (i0 + np.arange(nx)) * cell_size,
                            {"units": "m", "long_name": "x of the cell centre (particle frame)"})
         coords["map_y"] = ("map_y", (j0 + np.arange(ny)) * cell_size,
@@ -256,7 +295,7 @@ def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float
 # --- layers ------------------------------------------------------------------------------------
 #: per-step variables of a layer (along ``step`` only)
 LAYER_VARIABLES: tuple[Variable, ...] = (
-    _v("load_value", "", "N or 1", "prescribed load: F_N (N) or compression ratio (1)"),
+    _v("load_value", "", "N", "prescribed load: F_N (N) or compression ratio (1), see load_kind"),
     _v("total_force", "", "N", "total normal force F_N on each plate"),
     _v("plate_gap", "", "m", "plate separation h (force-weighted mean over the loaded "
                              "particles)"),
@@ -292,6 +331,14 @@ class LayerRecord(_Values):
     particles: list[StepRecord]
     values: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+
+    def __str__(self) -> str:
+        """One line for progress output: the step, the total F_N (N), how many particles are
+        loaded and what fractions of them stick, roll and rotate."""
+        v = self.values
+        return (f"step {self.step}: F_N {v['total_force']:.4g} N, {v['loaded']} loaded: "
+                f"{v['fraction_stick']:.0%} stick, {v['fraction_roll']:.0%} roll, "
+                f"{v['fraction_rotate']:.0%} rotate")
 
 
     @classmethod
@@ -397,7 +444,8 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
                           np.divide(F, totals, out=np.zeros_like(F), where=totals > 0),
                           {"units": "1", "long_name": "the particle's share of F_N"})
     data["load_kind"] = ("step", np.array([r.load_kind for r in records], dtype=str),
-                         {"long_name": "load control: force or compression"})
+                         _LOAD_KIND_ATTRS)
+    data["load_value"][2].update(_load_value_attrs(records))
     for name, values, attrs_e in _events(records):
         data[name] = ("event", values, attrs_e)
     pos = layer.positions
@@ -411,7 +459,7 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
     data["shape"] = ("particle", np.array([repr(p.particle.shape) for p in layer], dtype=str),
                      {"long_name": "shape"})
     coords: dict[str, Any] = {
-        "step": ("step", steps, {"long_name": "load step index"}),
+        "step": ("step", steps, _STEP_ATTRS),
         "particle": ("particle", np.arange(n), {"long_name": "particle index (layer order)"}),
     }
     for d in ("interface", "component", "quaternion_component"):
@@ -422,7 +470,7 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
         present = [m for _, m_list in stored for m in m_list if m is not None]
         i0, j0, nx, ny = _union(present)
         coords["map_step"] = ("map_step", np.array([s for s, _ in stored], dtype=int),
-                              {"long_name": "load step of the stored maps"})
+                              _MAP_STEP_ATTRS)
         coords["map_i"] = ("map_i", i0 + np.arange(nx),
                            {"long_name": "cell index along x from the particle's centroid"})
         coords["map_j"] = ("map_j", j0 + np.arange(ny),

@@ -48,7 +48,8 @@ from .particle.turning import find_stable_orientation, turn_kinematics
 from .records import STATES, LayerRecord, StepMaps, StepRecord, layer_dataset, to_dataset
 from .rigid import RigidState, classify
 
-__all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError", "StepMaps",
+__all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError",
+           "SimulationStoppedWarning", "StepMaps",
            "StepRecord"]
 
 #: rounds of turns and rebalancing within one step before a cascade counts as not settling
@@ -68,6 +69,13 @@ SHARE_TOL_STALLED = 1e-5
 
 class SimulationError(RuntimeError):
     """A step could not be completed (no stable orientation, a solver failure)."""
+
+
+class SimulationStoppedWarning(RuntimeWarning):
+    """A run stopped before its last step; the results hold the completed steps.
+
+    Its own class so that a caller that reports the stop itself (the CLI, a sweep worker) can
+    silence exactly this message and leave numpy's and everyone else's warnings visible."""
 
 
 @dataclass
@@ -598,7 +606,7 @@ class Simulation:
             self.status = "complete"
         except SimulationError as exc:
             self.status = f"failed: {exc}"
-            warnings.warn(f"simulation stopped: {exc}", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"simulation stopped: {exc}", SimulationStoppedWarning, stacklevel=2)
         return self.dataset()
 
     def snapshot(self, state: LayerState) -> bytes:

@@ -55,7 +55,7 @@ import numpy as np
 from .io.config import Config, ConfigError, parse_config
 from .io.results import RESUME_VARIABLE, run_to_file, write_results
 from .records import COORDS as _RECORD_COORDS
-from .records import LAYER_VARIABLES, VARIABLES
+from .records import LAYER_VARIABLES, VARIABLES, direction_sign
 
 __all__ = [
     "BEHAVIOURS",
@@ -331,7 +331,7 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
     ``steps``, ``elapsed`` (s), ``resumed``, ``worker`` (host:pid) and ``reused`` when a
     complete file was already there.
     """
-    from . import Simulation, __version__, set_workers
+    from . import Simulation, SimulationStoppedWarning, __version__, set_workers
 
     _relax_malloc_trim()
     path = Path(cases_dir) / f"{case_id}.nc"
@@ -359,7 +359,7 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
         attrs = {"config": config.to_toml(), "sweep_case": case_id,
                  "sweep_values": json.dumps(sweep_values or {})}
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
+            warnings.simplefilter("ignore", SimulationStoppedWarning)
             ds = run_to_file(sim, path, resume=resume, attrs=attrs)
         error_path.unlink(missing_ok=True)
         return {**record, "status": sim.status, "steps": int(ds.sizes.get("step", 0)),
@@ -582,7 +582,7 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
 
 # --- the summary -----------------------------------------------------------------------------
 _SUMMARY_INPUTS = ("turned", "state", "quaternion", "ratio", "compression", "normal_force",
-                   "time_total")
+                   "time_total", "tangential_force")
 #: per-step layer variables copied into the summary of a sweep over layers
 LAYER_STEP_VARIABLES = ("total_force", "compression", "loaded", "fraction_stick",
                         "fraction_roll", "fraction_rotate")
@@ -632,11 +632,15 @@ def _case_summary(case: _CaseData) -> dict:
         return _layer_case_summary(case, out)
     turned = np.flatnonzero(a["turned"].astype(bool))
     state = a["state"]
-    total, azimuth = _total_rotation(case)
+    # a case that never turned did not rotate: exactly 0, not the round-off of q q0⁻¹
+    total, azimuth = _total_rotation(case) if turned.size else (0.0, nan)
+    sign = 1.0
+    if "tangential_force" in a:
+        sign = float(direction_sign(a["tangential_force"])[-1])
     out.update(total_rotation=total, turn_azimuth=azimuth,
                turning_steps=int(turned.size), final_state=int(state[-1]),
-               final_ratio_up=float(a["ratio"][-1][0]),
-               final_ratio_low=float(a["ratio"][-1][1]),
+               final_ratio_up=sign * float(a["ratio"][-1][0]),
+               final_ratio_low=sign * float(a["ratio"][-1][1]),
                final_compression=float(a["compression"][-1]),
                compute_time=float(np.sum(a["time_total"])))
     if turned.size:
@@ -685,8 +689,10 @@ _SUMMARY_VARIABLES = {
     "first_turn_compression": ("1", "compression at the first turning step"),
     "turning_steps": ("1", "number of steps in which the particle turned"),
     "final_state": ("1", "state at the last step done (-1: none)"),
-    "final_ratio_up": ("1", "F_T/(mu_up F_N) at the last step"),
-    "final_ratio_low": ("1", "F_T/(mu_low F_N) at the last step"),
+    "final_ratio_up": ("1", "F_T/(mu_up F_N) at the last step, signed as in the state plot: "
+                            "negative when F' points against its first direction"),
+    "final_ratio_low": ("1", "F_T/(mu_low F_N) at the last step, signed as in the state plot: "
+                             "negative when F' points against its first direction"),
     "final_compression": ("1", "compression (d0 - h)/d0 at the last step"),
     "steps_done": ("1", "load steps completed"),
     "compute_time": ("s", "wall time of the case's load steps (sum of time_total)"),

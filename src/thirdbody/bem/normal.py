@@ -41,8 +41,11 @@ class ConvergenceError(RuntimeError):
     """A contact solver did not reach its tolerance within its iteration budget."""
 
 
-class ContactAtEdgeError(ValueError):
-    """The contact area reaches the edge of the window: the window is too small."""
+class ContactAtEdgeError(RuntimeError):
+    """The contact area reaches the edge of the window: the window is too small.
+
+    A :class:`RuntimeError` (the inputs were valid; the solution outgrew its window), like
+    :class:`ConvergenceError`."""
 
 
 @dataclass(frozen=True)

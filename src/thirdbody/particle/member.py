@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bem import ConvergenceError, TangentialContact
+from ..bem import ContactAtEdgeError, ConvergenceError, TangentialContact
 from ..loading import LoadStep
 from ..orientation import Rotation, decompose, key
 from ..records import StepMaps, StepRecord
@@ -232,7 +232,7 @@ class Member:
         for _ in range(60):                 # extend until the moment changes sign
             try:
                 b_m, b_out = moment_at(a_w + step)
-            except (ConvergenceError, ValueError):
+            except (ConvergenceError, ContactAtEdgeError, ValueError):
                 step *= 0.5                 # beyond what the plates can hold: overshoot
                 continue
             b_w = a_w + step
