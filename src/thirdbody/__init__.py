@@ -16,6 +16,10 @@ Public API::
     Simulation(layer, plates, load).run()  -> xarray.Dataset along (step, particle)
 """
 
+from ._interrupt import guard as _guard
+
+_guard()  # the thirdbody command only: Ctrl-C during these imports exits 130 quietly
+
 from . import orientation
 from ._citations import citations
 from ._version import __version__

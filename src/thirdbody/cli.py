@@ -28,6 +28,74 @@ def _fail(message: str, code: int = 2) -> None:
     raise typer.Exit(code)
 
 
+def _check_out(out: Path) -> None:
+    """Refuse an output directory that cannot be one, before anything is written: a file, a
+    path below a file, or a place without write permission (exit 2)."""
+    import os
+
+    if out.exists() and not out.is_dir():
+        _fail(f"-o {out}: exists and is not a directory")
+    ancestor = out
+    while not ancestor.exists():
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        _fail(f"-o {out}: {ancestor} is a file, not a directory")
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        _fail(f"-o {out}: no permission to write in {ancestor}")
+
+
+LOCK_NAME = ".thirdbody.lock"
+
+
+def _lock(out: Path):
+    """An exclusive lock on the output directory for as long as the run lasts (fcntl; released
+    when the process ends, however it ends). A second run into the same directory exits 2 and
+    names the holder's pid. Returns the open lock file: keep it open."""
+    import fcntl
+    import os
+
+    handle = (out / LOCK_NAME).open("a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.seek(0)
+        holder = handle.read().strip() or "unknown"
+        handle.close()
+        _fail(f"-o {out} is in use by another thirdbody run (pid {holder}); wait for it or "
+              "choose another --out")
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f"{os.getpid()}\n")
+    handle.flush()
+    return handle
+
+
+def _resumable(results: Path, sim) -> None:
+    """Every check of ``--resume`` that needs only reading: the file exists, holds an
+    unfinished run, and was made with the same inputs (exit 2 otherwise)."""
+    import json
+
+    from .io import open_results
+    from .io.results import RESUME_VARIABLE
+
+    if not results.exists():
+        _fail(f"nothing to resume: {results} does not exist")
+    try:
+        saved = open_results(results)
+    except (OSError, ValueError) as exc:
+        _fail(f"cannot read {results}: {exc}")
+    if RESUME_VARIABLE not in saved:
+        _fail(f"{results} holds a finished run ({saved.attrs.get('status')}); nothing to "
+              "resume")
+    try:
+        inputs = json.loads(str(saved.attrs.get("inputs", "")))
+    except ValueError:
+        inputs = None
+    if inputs != json.loads(json.dumps(sim.inputs())):
+        _fail(f"cannot resume {results}: it was made with different inputs (compare "
+              f"{results.parent / 'config.toml'} with this configuration)")
+
+
 def _examples() -> dict[str, Path]:
     """Bundled examples by name: the TOML configurations, and ``fig2`` (a Python script: the
     single-interface partial-slip example, run with ``python fig2.py --out DIR``)."""
@@ -47,6 +115,35 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         plots: Annotated[bool, typer.Option(help="write the figures at the end")] = True,
         ) -> None:
     """Run a simulation: OUT/results.nc (written after every step), OUT/config.toml, figures."""
+    results = out / "results.nc"
+    try:
+        _run(config, out, results, resume, print_config, plots)
+    except KeyboardInterrupt:
+        results.with_name(results.name + ".tmp").unlink(missing_ok=True)
+        done = _steps_on_disk(results)
+        if done:
+            typer.echo(f"\ninterrupted: {results} holds {done} completed step(s); continue "
+                       f"with `thirdbody run {config} -o {out} --resume`", err=True)
+        else:
+            typer.echo("\ninterrupted before the first step completed: nothing was saved; "
+                       f"run `thirdbody run {config} -o {out}` again to start", err=True)
+        raise typer.Exit(130) from None
+
+
+def _steps_on_disk(results: Path) -> int:
+    """Completed steps in a results file (0 if there is none or it cannot be read)."""
+    if not results.is_file():
+        return 0
+    try:
+        from .io import open_results
+
+        return int(open_results(results).sizes.get("step", 0))
+    except (OSError, ValueError):
+        return 0
+
+
+def _run(config: Path, out: Path, results: Path, resume: bool, print_config: bool,
+         plots: bool) -> None:
     import warnings
 
     from .io import ConfigError, load_config, run_to_file
@@ -60,19 +157,32 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         typer.echo(cfg.to_toml())
         return
     body, plates, load, numerics = cfg.build()
-    sim = Simulation(body, plates, load, **numerics)
-    results = out / "results.nc"
-    if results.exists() and not resume:
+    try:
+        sim = Simulation(body, plates, load, **numerics)
+    except ValueError as exc:
+        _fail(str(exc))
+    # every check first; only then is anything written (the directory, its lock, config.toml)
+    _check_out(out)
+    if resume:
+        _resumable(results, sim)
+    elif results.exists():
         _fail(f"{results} exists: use --resume to continue it, or another --out")
-    if not resume:
+    else:
         try:
             sim.preflight()
         except ValueError as exc:
-            _fail(f"invalid configuration {config}: numerics.{exc}")
+            _fail(f"invalid configuration {config}: {exc}")
         except SimulationError as exc:
             _fail(f"invalid configuration {config}: {exc}")
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "config.toml").write_text(cfg.to_toml())
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        _fail(f"-o {out}: cannot create it: {exc.strerror}")
+    lock = _lock(out)  # noqa: F841 - held until the process exits
+    if not resume:
+        if results.exists():            # written by a run that held the lock before us
+            _fail(f"{results} exists: use --resume to continue it, or another --out")
+        (out / "config.toml").write_text(cfg.to_toml())
     n = len(sim.schedule)
     start = time.perf_counter()
     from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
@@ -90,10 +200,6 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
                 warnings.simplefilter("ignore", SimulationStoppedWarning)
                 ds = run_to_file(sim, results, resume=resume, progress=progress,
                                  attrs={"config": cfg.to_toml()})
-        except KeyboardInterrupt:
-            typer.echo(f"\ninterrupted: {results} holds the completed steps; continue with "
-                       f"`thirdbody run {config} -o {out} --resume`", err=True)
-            raise typer.Exit(130) from None
         except (FileNotFoundError, ValueError) as exc:
             _fail(str(exc))
     elapsed = time.perf_counter() - start
@@ -201,6 +307,10 @@ def plot(results: Annotated[Path, typer.Argument(
         ds = open_results(results)
     except (OSError, ValueError) as exc:
         _fail(f"cannot read {results}: {exc}")
+    title = str(ds.attrs.get("title", ""))
+    if not title.startswith("thirdbody") and "behaviour" not in ds:
+        _fail(f"{results} is not a thirdbody results file (no 'thirdbody' title attribute); "
+              "plot reads the results.nc of `thirdbody run` or a sweep's summary.nc")
     if "behaviour" in ds:                       # a sweep's summary.nc
         from .plot import save_state_map
 
@@ -323,7 +433,14 @@ def _validation_rows() -> list[tuple[str, float, float, float]]:
 
 
 def main() -> None:  # pragma: no cover - console entry point
-    app(prog_name="thirdbody")
+    from ._interrupt import restore
+
+    restore()           # imports are done: Ctrl-C is a KeyboardInterrupt again
+    try:
+        app(prog_name="thirdbody")
+    except KeyboardInterrupt:
+        sys.stderr.write("\ninterrupted\n")
+        sys.exit(130)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -36,9 +36,21 @@ class LoadStep:
     value: float
 
 
+#: the most load steps a program may have: a longer run would need ≥ 0.5 GiB of step records
+#: and days of computing (≥ 20 ms a step), far beyond any sensible load history
+MAX_STEPS = 100_000
+_STEP_BYTES = 5 * 1024          # a step record in memory, about (its variables and their dict)
+_STEP_SECONDS = 0.02            # the cheapest step measured (a sphere at resolution 20)
+
+
 def _count(name: str, value: int) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+    if value > MAX_STEPS:
+        raise ValueError(
+            f"{name} = {value}: that many steps would need about "
+            f"{value * _STEP_BYTES / 2**30:.3g} GiB for the step records alone and at least "
+            f"{value * _STEP_SECONDS / 86400:.3g} days; at most {MAX_STEPS} steps are allowed")
     return int(value)
 
 

@@ -52,6 +52,8 @@ __all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationErr
            "SimulationStoppedWarning", "StepMaps",
            "StepRecord"]
 
+#: the finest grid allowed, cells per particle size (as numerics.resolution's range)
+MAX_RESOLUTION = 4000.0
 #: rounds of turns and rebalancing within one step before a cascade counts as not settling
 MAX_CASCADE_ROUNDS = 25
 #: a particle whose modelled share is below this fraction of F_N counts as unloaded
@@ -156,10 +158,25 @@ class Simulation:
         if isinstance(maps_every, bool) or not isinstance(maps_every, int) or maps_every < 0:
             raise ValueError(f"maps_every must be an integer >= 0, got {maps_every!r}")
         self.plates, self.load = plates, load
+        self._resolution_key = "resolution (numerics.resolution)"
         if cell_size is not None:
+            self._resolution_key = "cell_size (numerics.cell_size)"
             cells = [positive("cell_size (m)", cell_size)] * len(self.layer)
+            finest = max(p.particle.shape.size for p in self.layer) / cells[0]
+            if finest > MAX_RESOLUTION:
+                # refused from an estimate, before a surface is computed: the particle's
+                # surface grids alone would hold ~10 arrays of finest² doubles
+                raise ValueError(
+                    f"cell_size (numerics.cell_size) = {cell_size:.3g} m gives {finest:.3g} "
+                    f"cells per particle size (about {10 * 8 * finest**2 / 2**30:.3g} GiB for "
+                    f"the surface grids alone); at most {MAX_RESOLUTION} are allowed, i.e. "
+                    f"cell_size >= "
+                    f"{max(p.particle.shape.size for p in self.layer) / MAX_RESOLUTION:.3g} m")
         else:
             res = positive("resolution (cells per particle size)", resolution)
+            if res > MAX_RESOLUTION:
+                raise ValueError(f"resolution (numerics.resolution) = {res:.6g} cells per "
+                                 f"particle size: at most {MAX_RESOLUTION} are allowed")
             cells = [p.particle.shape.size / res for p in self.layer]
         self.tol = positive("tol", tol)
         self.angle_step = math.radians(positive("angle_step_deg (degrees)", angle_step_deg))
@@ -375,10 +392,16 @@ class Simulation:
             res = member.particle.shape.size / member.cell_size
             needed = res * self.MIN_CONTACT_CELLS / max(smallest, 1)
             where = "" if self.single else f" of particle {which}"
+            if self._resolution_key.startswith("cell_size"):
+                raise ValueError(
+                    f"cell_size (numerics.cell_size) = {member.cell_size:.4g} m is too coarse "
+                    f"({res:.4g} cells per particle size): the contact{where} at the largest "
+                    f"load spans {smallest} cells; use at most "
+                    f"{member.particle.shape.size / needed:.3g} m")
             raise ValueError(
-                f"resolution (cells per particle size) {res:.4g} is too coarse: the contact"
-                f"{where} at the largest load spans {smallest} cells; use at least "
-                f"{needed:.0f}")
+                f"resolution (numerics.resolution) = {res:.4g} cells per particle size is too "
+                f"coarse: the contact{where} at the largest load spans {smallest} cells; use "
+                f"at least {needed:.0f}")
         return int(smallest)
 
     def _initial_state(self) -> LayerState:

@@ -196,6 +196,9 @@ def load_sweep(path: str | Path) -> Sweep:
         data = tomllib.loads(path.read_text())
     except OSError as exc:
         raise SweepError(f"cannot read sweep file {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise SweepError(f"sweep file {path} is not UTF-8 text (a binary file?); a sweep "
+                         "file is TOML") from None
     except tomllib.TOMLDecodeError as exc:
         raise SweepError(f"sweep file {path} is not valid TOML: {exc}") from None
     return parse_sweep(data, base_dir=path.parent, source=str(path))

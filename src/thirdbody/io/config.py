@@ -68,55 +68,63 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 __all__ = ["Config", "ConfigError", "body_from_results", "load_config"]
 
 
+_Num = Annotated[float, Field(strict=True)]
+_Pos = Annotated[float, Field(strict=True, gt=0)]
+_NonNeg = Annotated[float, Field(strict=True, ge=0)]
+
+
 class ConfigError(ValueError):
     """An invalid configuration; the message lists every problem with its key."""
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # numbers are strict (a string is not a number, true is not a count; an integer is a
+    # float) and finite
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class SphereShape(_Model):
     shape: Literal["sphere"]
-    radius: Annotated[float, Field(gt=0, description="m")]
+    radius: Annotated[float, Field(strict=True, gt=0, description="m")]
 
 
 class EllipsoidShape(_Model):
     shape: Literal["ellipsoid"]
-    semi_axes: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)],
-                     Annotated[float, Field(gt=0)]] = Field(description="m: A (x), B (y), C (z)")
+    semi_axes: tuple[_Pos, _Pos,
+                     _Pos] = Field(description="m: A (x), B (y), C (z)")
 
 
 class PotatoShape(_Model):
     shape: Literal["potato"]
-    semi_axes: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)],
-                     Annotated[float, Field(gt=0)]] = Field(description="m")
-    seed: Annotated[int, Field(ge=0)] = 0
-    n_waves: Annotated[int, Field(ge=0, le=20)] = 3
-    amplitude: Annotated[float, Field(ge=0, le=0.5)] = 0.05
-    wavenumber_range: tuple[Annotated[float, Field(ge=0)], Annotated[float, Field(ge=0)]] = (2, 4)
+    semi_axes: tuple[_Pos, _Pos,
+                     _Pos] = Field(description="m")
+    seed: Annotated[int, Field(strict=True, ge=0)] = 0
+    n_waves: Annotated[int, Field(strict=True, ge=0, le=20)] = 3
+    amplitude: Annotated[float, Field(strict=True, ge=0, le=0.5)] = 0.05
+    wavenumber_range: tuple[_NonNeg, _NonNeg] = (2, 4)
 
 
 class MeshShapeConfig(_Model):
     shape: Literal["mesh"]
     file: str = Field(description="STL/OBJ/PLY path, relative to the config file")
-    scale: Annotated[float, Field(gt=0)] = 1.0
-    subdivisions: Annotated[int, Field(ge=0, le=5, description="Loop subdivisions")] = 0
-    max_edge: Annotated[float | None, Field(gt=0, description="m, after scale")] = None
+    scale: _Pos = 1.0
+    subdivisions: Annotated[int, Field(strict=True, ge=0, le=5,
+                                       description="Loop subdivisions")] = 0
+    max_edge: Annotated[float | None, Field(strict=True, gt=0, description="m, after scale")] = None
 
 
 class Particle(_Model):
     geometry: Annotated[SphereShape | EllipsoidShape | PotatoShape | MeshShapeConfig,
                         Field(discriminator="shape")]
-    E: Annotated[float, Field(gt=0, description="Young's modulus, Pa")]
-    nu: Annotated[float, Field(gt=-1, le=0.5, description="Poisson ratio")]
-    orientation_deg: float = Field(0.0, allow_inf_nan=False,
+    E: Annotated[float, Field(strict=True, gt=0, description="Young's modulus, Pa")]
+    nu: Annotated[float, Field(strict=True, gt=-1, le=0.5, description="Poisson ratio")]
+    orientation_deg: _Num = Field(0.0, allow_inf_nan=False,
                                    description="initial tilt angle, degrees")
-    tilt_axis_deg: float = Field(90.0, allow_inf_nan=False,
+    tilt_axis_deg: _Num = Field(90.0, allow_inf_nan=False,
                                  description="azimuth of the tilt axis from +x, degrees")
-    yaw_deg: float = Field(0.0, allow_inf_nan=False,
+    yaw_deg: _Num = Field(0.0, allow_inf_nan=False,
                            description="rotation about the body z axis before the tilt")
-    quaternion: tuple[float, float, float, float] | None = Field(
+    quaternion: tuple[_Num, _Num, _Num, _Num] | None = Field(
         None, description="initial orientation (x, y, z, w), instead of the tilt")
 
     @model_validator(mode="after")
@@ -129,31 +137,31 @@ class Particle(_Model):
 
 
 class PlacedParticle(Particle):
-    x: float = Field(0.0, allow_inf_nan=False, description="centroid x, m")
-    y: float = Field(0.0, allow_inf_nan=False, description="centroid y, m")
+    x: _Num = Field(0.0, allow_inf_nan=False, description="centroid x, m")
+    y: _Num = Field(0.0, allow_inf_nan=False, description="centroid y, m")
 
 
 class LayerGenerator(_Model):
-    box: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)]] = Field(
+    box: tuple[_Pos, _Pos] = Field(
         description="m: the rectangle (L_x, L_y) of the centroids, centred on the origin")
-    count: Annotated[int | None, Field(ge=1)] = None
-    area_fraction: Annotated[float | None, Field(gt=0, le=0.5)] = None
+    count: Annotated[int | None, Field(strict=True, ge=1)] = None
+    area_fraction: Annotated[float | None, Field(strict=True, gt=0, le=0.5)] = None
     shape: Literal["sphere", "ellipsoid", "potato"] = "sphere"
-    size: Annotated[float, Field(gt=0, description="m")] = 1e-3
-    size_std: Annotated[float, Field(ge=0, description="m")] = 0.0
+    size: Annotated[float, Field(strict=True, gt=0, description="m")] = 1e-3
+    size_std: Annotated[float, Field(strict=True, ge=0, description="m")] = 0.0
     distribution: Literal["fixed", "normal", "lognormal", "list"] = "fixed"
-    sizes: list[Annotated[float, Field(gt=0)]] | str | None = Field(
+    sizes: list[_Pos] | str | None = Field(
         None, description="m, or a CSV file (relative to the config file)")
-    aspect: tuple[Annotated[float, Field(gt=0)], Annotated[float, Field(gt=0)],
-                  Annotated[float, Field(gt=0)]] = (1.0, 0.8, 0.7)
-    amplitude: Annotated[float, Field(ge=0, le=0.5)] = 0.05
-    n_waves: Annotated[int, Field(ge=0, le=20)] = 3
-    wavenumber_range: tuple[Annotated[float, Field(ge=0)], Annotated[float, Field(ge=0)]] = (2, 4)
+    aspect: tuple[_Pos, _Pos,
+                  _Pos] = (1.0, 0.8, 0.7)
+    amplitude: Annotated[float, Field(strict=True, ge=0, le=0.5)] = 0.05
+    n_waves: Annotated[int, Field(strict=True, ge=0, le=20)] = 3
+    wavenumber_range: tuple[_NonNeg, _NonNeg] = (2, 4)
     orientation: Literal["random", "tilted", "upright"] = "random"
-    max_tilt_deg: Annotated[float, Field(ge=0, le=90)] = 30.0
-    seed: Annotated[int, Field(ge=0)] = 0
-    E: Annotated[float, Field(gt=0, description="Young's modulus, Pa")]
-    nu: Annotated[float, Field(gt=-1, le=0.5, description="Poisson ratio")]
+    max_tilt_deg: Annotated[float, Field(strict=True, ge=0, le=90)] = 30.0
+    seed: Annotated[int, Field(strict=True, ge=0)] = 0
+    E: Annotated[float, Field(strict=True, gt=0, description="Young's modulus, Pa")]
+    nu: Annotated[float, Field(strict=True, gt=-1, le=0.5, description="Poisson ratio")]
 
     @model_validator(mode="after")
     def _one_amount(self):
@@ -163,49 +171,54 @@ class LayerGenerator(_Model):
 
 
 class Plates(_Model):
-    mu_up: Annotated[float, Field(ge=0, description="friction coefficient, upper plate")]
-    mu_low: Annotated[float | None, Field(ge=0)] = None
+    mu_up: Annotated[float, Field(strict=True, ge=0,
+                                  description="friction coefficient, upper plate")]
+    mu_low: Annotated[float | None, Field(strict=True, ge=0)] = None
 
 
 class LinearRampLoad(_Model):
     program: Literal["linear_ramp"]
-    stop: Annotated[float, Field(gt=0, description="final normal force, N")]
-    steps: Annotated[int, Field(ge=1)] = 50
-    start: Annotated[float | None, Field(gt=0)] = None
+    stop: Annotated[float, Field(strict=True, gt=0, description="final normal force, N")]
+    steps: Annotated[int, Field(strict=True, ge=1)] = 50
+    start: Annotated[float | None, Field(strict=True, gt=0)] = None
 
 
 class HoldThenRampLoad(_Model):
     program: Literal["hold_then_ramp"]
-    hold: Annotated[float, Field(gt=0, description="N")]
-    hold_steps: Annotated[int, Field(ge=1)]
-    stop: Annotated[float, Field(gt=0, description="N")]
-    ramp_steps: Annotated[int, Field(ge=1)]
+    hold: Annotated[float, Field(strict=True, gt=0, description="N")]
+    hold_steps: Annotated[int, Field(strict=True, ge=1)]
+    stop: Annotated[float, Field(strict=True, gt=0, description="N")]
+    ramp_steps: Annotated[int, Field(strict=True, ge=1)]
 
 
 class ForceTableLoad(_Model):
     program: Literal["force_table"]
-    forces: list[Annotated[float, Field(gt=0)]] = Field(min_length=1, description="N")
+    forces: list[_Pos] = Field(min_length=1, description="N")
 
 
 class GapRampLoad(_Model):
     program: Literal["gap_ramp"]
-    stop: Annotated[float, Field(gt=0, le=0.5, description="final compression (d0-h)/d0")]
-    steps: Annotated[int, Field(ge=1)] = 50
-    start: Annotated[float | None, Field(gt=0, le=0.5)] = None
+    stop: Annotated[float, Field(strict=True, gt=0, le=0.5,
+                                 description="final compression (d0-h)/d0")]
+    steps: Annotated[int, Field(strict=True, ge=1)] = 50
+    start: Annotated[float | None, Field(strict=True, gt=0, le=0.5)] = None
 
 
 class Numerics(_Model):
-    resolution: Annotated[float, Field(ge=10, le=4000, description="cells per particle size")] \
-        = 80.0
-    cell_size: Annotated[float | None, Field(gt=0, description="m; overrides resolution")] = None
-    tol: Annotated[float, Field(gt=0, lt=1e-2)] = 1e-8
-    angle_step_deg: Annotated[float, Field(gt=0, le=10)] = 1.0
-    angle_tol_deg: Annotated[float, Field(gt=0, le=1)] = 0.01
-    maps_every: Annotated[int, Field(ge=0)] = 5
+    resolution: Annotated[float, Field(strict=True, ge=10, le=4000,
+                                       description="cells per particle size")] = 80.0
+    cell_size: Annotated[float | None, Field(strict=True, gt=0,
+                                             description="m; overrides resolution")] = None
+    tol: Annotated[float, Field(strict=True, gt=0, lt=1e-2)] = 1e-8
+    angle_step_deg: Annotated[float, Field(strict=True, gt=0, le=10)] = 1.0
+    angle_tol_deg: Annotated[float, Field(strict=True, gt=0, le=1)] = 0.01
+    maps_every: Annotated[int, Field(strict=True, ge=0)] = 5
     classification: Literal["statics", "paper"] = "statics"
-    twist_tol: Annotated[float, Field(ge=0, description="twisting moment left unbalanced, "
+    twist_tol: Annotated[float, Field(strict=True, ge=0,
+                                      description="twisting moment left unbalanced, "
                                       "relative to max(mu) F_N a")] = 1e-3
-    workers: Annotated[int, Field(ge=1, le=256, description="processes turning the particles "
+    workers: Annotated[int, Field(strict=True, ge=1, le=256,
+                                  description="processes turning the particles "
                                   "of a layer in parallel")] = 1
     coupling: Annotated[bool, Field(strict=True, description="normal-tangential coupling "
                                     "(nu < 0.5); default off: Goodman's approximation")] = False
@@ -349,6 +362,9 @@ def load_config(path: str | Path) -> Config:
         text = path.read_text()
     except OSError as exc:
         raise ConfigError(f"cannot read configuration {path}: {exc.strerror}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"configuration {path} is not UTF-8 text (a binary file?); a "
+                          "configuration is TOML") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

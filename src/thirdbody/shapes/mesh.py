@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from os import PathLike
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
@@ -129,12 +130,24 @@ class MeshShape(Shape):
         Raises
         ------
         ValueError
-            If the mesh is not watertight, not consistently oriented, has several bodies, or
+            If the file is missing or in a format trimesh cannot read here, if the mesh is not
+            watertight, not consistently oriented, has several bodies, or
             the refinement would exceed the face budget.
         """
         tm = _trimesh()
         name = str(path)
-        mesh = tm.load(path, force="mesh")
+        if not Path(path).is_file():
+            raise ValueError(f"mesh file {name!r} does not exist")
+        try:
+            mesh = tm.load(path, force="mesh")
+        except (ValueError, OSError):
+            raise
+        except Exception as exc:
+            # trimesh raises NotImplementedError for unknown types, ImportError (or
+            # ModuleNotFoundError) when a format's optional backend is missing (.step), ...
+            readable = "STL, OBJ, PLY, OFF, GLB/GLTF"
+            raise ValueError(f"cannot read mesh file {name!r} ({type(exc).__name__}: {exc}); "
+                             f"readable formats: {readable}") from None
         if not isinstance(mesh, tm.Trimesh) or len(mesh.faces) == 0:
             raise ValueError(f"mesh file {name!r} contains no triangles")
         if scale != 1.0:
