@@ -228,6 +228,8 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
           plots: Annotated[bool, typer.Option(help="write the state map at the end")] = True,
           connect_timeout: Annotated[float, typer.Option(
               min=0.1, help="seconds to wait for --scheduler before giving up")] = 30.0,
+          max_cases: Annotated[int, typer.Option(
+              "--max-cases", min=1, help="refuse a sweep of more cases than this")] = 1000,
           ) -> None:
     """Run the Cartesian product of a sweep on dask.distributed: OUT/cases/<hash>.nc per case,
     OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases."""
@@ -241,6 +243,16 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
               "own workers run the cases")
     try:
         spec = load_sweep(sweep_file)
+    except SweepError as exc:
+        _fail(str(exc))
+    # the size and a rough cost at once, before any case is built
+    count = math.prod(spec.shape)
+    typer.echo(f"{count} cases ({' x '.join(str(n) for n in spec.shape) or '1'}); "
+               f"{spec.cost_estimate()}")
+    if count > max_cases:
+        _fail(f"{count} cases exceed --max-cases {max_cases}; pass --max-cases {count} to "
+              "run them")
+    try:
         cases = spec.cases()
     except SweepError as exc:
         _fail(str(exc))

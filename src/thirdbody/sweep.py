@@ -33,6 +33,7 @@ the steps the dead one wrote.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import itertools
@@ -167,6 +168,23 @@ class Sweep:
             raise SweepError("\n".join(shown))
         return cases
 
+    def cost_estimate(self) -> str:
+        """A rough cost of the whole sweep, from the base's steps and resolution alone (axes
+        that change them are not looked at): about 1.2 s per load step at 60 cells per
+        particle size on one core (the bundled Fig. 4 sweep), scaling with the cells."""
+        data = _deep_copy(self.base)
+        for key, value in self.overrides.items():
+            _set_key(data, key, value)
+        load, numerics = data.get("load", {}), data.get("numerics", {})
+        steps = load.get("steps") or len(load.get("forces", [])) or \
+            (load.get("hold_steps", 0) + load.get("ramp_steps", 0)) or 50
+        resolution = numerics.get("resolution", 80.0)
+        if not isinstance(steps, int | float) or not isinstance(resolution, int | float):
+            return "cost unknown"
+        hours = math.prod(self.shape) * steps * 1.2 * (resolution / 60.0) ** 2 / 3600.0
+        return (f"roughly {hours:.2g} core-hours ({steps} steps at {resolution:g} cells per "
+                "particle size per case, ~1.2 s a step at 60)")
+
     def to_toml(self) -> str:
         """The sweep as TOML (base inline), to store next to the results."""
         def value(v) -> str:
@@ -183,8 +201,13 @@ class Sweep:
 
 
 def case_id(config: Config) -> str:
-    """16 hex digits of the SHA-256 of the resolved configuration (canonical JSON)."""
-    text = json.dumps(config.model_dump(mode="json", exclude={"base_dir"}), sort_keys=True)
+    """16 hex digits of the SHA-256 of the resolved configuration (canonical JSON), with the
+    content of its mesh files: an edited mesh is a new case."""
+    data = config.model_dump(mode="json", exclude={"base_dir"})
+    digests = config.mesh_digests()
+    if digests:
+        data["mesh_sha256"] = digests
+    text = json.dumps(data, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -334,6 +357,8 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
     ``steps``, ``elapsed`` (s), ``resumed``, ``worker`` (host:pid) and ``reused`` when a
     complete file was already there.
     """
+    import dask
+
     from . import Simulation, SimulationStoppedWarning, __version__, set_workers
 
     _relax_malloc_trim()
@@ -344,7 +369,11 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
     start = time.perf_counter()
     try:
         set_workers(fft_threads)
-        found = _read_case(path, ())
+        try:
+            found = _read_case(path, ())
+        except UnreadableCase:
+            record["set_aside"] = str(_set_aside(path))
+            found = None
         if found is not None and not found.partial:
             # an earlier attempt of this sweep finished the file (a worker killed between
             # writing it and reporting back): the case was computed, not already done
@@ -361,7 +390,10 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
             sim.preflight()
         attrs = {"config": config.to_toml(), "sweep_case": case_id,
                  "sweep_values": json.dumps(sweep_values or {})}
-        with warnings.catch_warnings():
+        # a local lock for the NetCDF writes: inside a worker xarray would otherwise take a
+        # distributed lock through the scheduler for every write (slower, and failing with
+        # "ConnectionPool is closed" when the sweep is stopped)
+        with warnings.catch_warnings(), dask.config.set(scheduler="synchronous"):
             warnings.simplefilter("ignore", SimulationStoppedWarning)
             ds = run_to_file(sim, path, resume=resume, attrs=attrs)
         error_path.unlink(missing_ok=True)
@@ -407,9 +439,27 @@ def _relax_malloc_trim() -> None:
         pass
 
 
+class UnreadableCase(OSError):
+    """A case file exists but cannot be read (damaged, or locked by HDF5 on a network file
+    system). It is never deleted: a run moves it aside (:func:`_set_aside`) and recomputes."""
+
+
+def _set_aside(path: Path) -> Path:
+    """Rename an unreadable case file to ``<name>.unreadable-<n>`` (kept for inspection)."""
+    n = 1
+    while (target := path.with_name(f"{path.name}.unreadable-{n}")).exists():
+        n += 1
+    path.rename(target)
+    return target
+
+
 def _case_status(path: Path) -> str | None:
-    """The status of a finished case file, or None (absent, partial or unreadable)."""
-    case = _read_case(path, ())
+    """The status of a finished case file, None (absent or partial), or ``"unreadable"``.
+    Reads only: changes nothing on disk (``--dry-run``)."""
+    try:
+        case = _read_case(path, ())
+    except UnreadableCase:
+        return "unreadable"
     if case is None or case.partial:
         return None
     return case.status
@@ -430,8 +480,8 @@ _KEPT_ATTRS = ("units", "long_name", "flag_values", "flag_meanings")
 
 def _read_case(path: Path, names: Iterable[str]) -> _CaseData | None:
     """Read a case file's status and the per-step variables ``names`` straight through h5py
-    (ten times faster than xarray for the summary). An unreadable file is removed: the case
-    then starts afresh."""
+    (ten times faster than xarray for the summary). None if there is no file; an unreadable
+    file raises :class:`UnreadableCase` and is left as it is."""
     import h5py
 
     if not path.exists():
@@ -447,9 +497,8 @@ def _read_case(path: Path, names: Iterable[str]) -> _CaseData | None:
             return _CaseData(_text(f.attrs.get("status", "complete")), RESUME_VARIABLE in f,
                              _text(f.attrs.get("inputs", "")),
                              _text(f.attrs.get("thirdbody_version", "")), arrays, attrs)
-    except OSError:
-        path.unlink()
-        return None
+    except OSError as exc:
+        raise UnreadableCase(f"{path}: {exc}") from None
 
 
 def _text(value):
@@ -472,6 +521,8 @@ class SweepReport:
     summary: Any
     elapsed: float
     figures: list[Path] = field(default_factory=list)
+    #: unreadable case files moved aside (original, new name) before their cases were rerun
+    set_aside: list[tuple[Path, Path]] = field(default_factory=list)
 
     @property
     def computed(self) -> int:
@@ -507,8 +558,14 @@ def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | No
     records: dict[str, dict] = {}
     finished: dict[str, _CaseData] = {}     # read once, for the skip and for the summary
     todo = []
+    set_aside: list[tuple[Path, Path]] = []
     for case in cases:
-        found = _read_case(cases_dir / case.filename, _SUMMARY_NAMES)
+        path = cases_dir / case.filename
+        try:
+            found = _read_case(path, _SUMMARY_NAMES)
+        except UnreadableCase:
+            set_aside.append((path, _set_aside(path)))
+            found = None
         if found is None or found.partial:
             todo.append(case)
         else:
@@ -516,10 +573,21 @@ def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | No
             records[case.case_id] = {"case": case.case_id, "status": found.status,
                                      "skipped": True}
     total = len(cases)
+    text = sweep.to_toml()
+    if not todo and not set_aside and _up_to_date(out, text, cases, plots):
+        # a finished sweep run again: report it, touch nothing
+        from .io import open_results
+
+        if progress:
+            for r in list(records.values()):
+                progress(r, len(records), total)
+        return SweepReport(out, cases, records, open_results(out / "summary.nc"),
+                           time.perf_counter() - start, [])
     with _dask_client(client if todo else None, scheduler, workers, needed=bool(todo),
                       timeout=connect_timeout) as dask:
         cases_dir.mkdir(parents=True, exist_ok=True)   # only once the cluster is reachable
-        (out / "sweep.toml").write_text(sweep.to_toml())
+        if not (out / "sweep.toml").is_file() or (out / "sweep.toml").read_text() != text:
+            (out / "sweep.toml").write_text(text)
         if progress:
             for r in list(records.values()):
                 progress(r, len(records), total)
@@ -531,7 +599,22 @@ def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | No
         from .plot import save_state_map
 
         figures = save_state_map(summary, out)
-    return SweepReport(out, cases, records, summary, time.perf_counter() - start, figures)
+    return SweepReport(out, cases, records, summary, time.perf_counter() - start, figures,
+                       set_aside)
+
+
+def _up_to_date(out: Path, text: str, cases: list[Case], plots: bool) -> bool:
+    """Whether ``out`` already holds this sweep's summary of exactly these finished cases:
+    the same sweep.toml, summary.nc and .csv (and the state map, if plots are wanted) newer
+    than every case file."""
+    files = [out / "sweep.toml", out / "summary.nc", out / "summary.csv"]
+    if plots:
+        files.append(out / "state_map.png")
+    if not all(f.is_file() for f in files) or files[0].read_text() != text:
+        return False
+    newest = max((out / "cases" / c.filename).stat().st_mtime_ns for c in cases) \
+        if cases else 0
+    return min(f.stat().st_mtime_ns for f in files[1:]) >= newest
 
 
 @contextmanager
@@ -549,14 +632,39 @@ def _dask_client(client, scheduler: str | None, workers: int | None, needed: boo
             yield own
         return
     import logging
+    import signal
 
     import dask
 
-    with dask.config.set(LOCAL_WORKER_CONFIG), LocalCluster(
-            n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-            host="127.0.0.1", dashboard_address=":0", silence_logs=logging.ERROR) as cluster, \
-            Client(cluster) as own:
-        yield own
+    # the workers ignore Ctrl-C: only this process handles it (it cancels the cases and shuts
+    # the cluster down), so no worker dies mid-case and reports a bogus error
+    with dask.config.set(LOCAL_WORKER_CONFIG):
+        try:
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        except ValueError:                  # not the main thread
+            previous = None
+        try:
+            cluster = LocalCluster(
+                n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                processes=True, host="127.0.0.1", dashboard_address=":0",
+                silence_logs=logging.ERROR)
+        finally:
+            if previous is not None:
+                signal.signal(signal.SIGINT, previous)
+        own = Client(cluster)
+        try:
+            yield own
+        except KeyboardInterrupt:
+            # closing the cluster after an interrupt logs connection errors and may fail: not
+            # for the user, who gets one line from the command
+            for name in ("distributed", "tornado", "asyncio"):
+                logging.getLogger(name).setLevel(logging.CRITICAL)
+            for close in (own.close, cluster.close):
+                with contextlib.suppress(Exception):
+                    close(timeout=10)
+            raise
+        own.close()
+        cluster.close()
 
 
 def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: int, progress,
@@ -570,17 +678,24 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
                             case.case_id, sweep_values=case.values,
                             key=f"thirdbody-case-{case.case_id}", pure=False)
         futures[fut] = case
-    for fut in as_completed(futures):
-        case = futures[fut]
-        if fut.status == "finished":
-            record = fut.result()
-        else:                                   # e.g. KilledWorker after repeated deaths
-            exc = fut.exception()
-            record = {"case": case.case_id, "status": f"error: {type(exc).__name__}: {exc}"}
-            (cases_dir / f"{case.case_id}.error.txt").write_text(record["status"] + "\n")
-        records[case.case_id] = record
-        if progress:
-            progress(record, len(records), total)
+    try:
+        for fut in as_completed(futures):
+            case = futures[fut]
+            if fut.status == "finished":
+                record = fut.result()
+            elif fut.status == "cancelled":     # the sweep is being stopped: not an error
+                continue
+            else:                               # e.g. KilledWorker after repeated deaths
+                exc = fut.exception()
+                record = {"case": case.case_id,
+                          "status": f"error: {type(exc).__name__}: {exc}"}
+                (cases_dir / f"{case.case_id}.error.txt").write_text(record["status"] + "\n")
+            records[case.case_id] = record
+            if progress:
+                progress(record, len(records), total)
+    except KeyboardInterrupt:
+        client.cancel(list(futures))
+        raise
 
 
 # --- the summary -----------------------------------------------------------------------------
@@ -734,7 +849,12 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
         path = out / "cases" / case.filename
         ids[case.index] = case.case_id
         summ = {}
-        data_ = (loaded or {}).get(case.case_id) or _read_case(path, _SUMMARY_NAMES)
+        data_ = (loaded or {}).get(case.case_id)
+        if data_ is None:
+            try:
+                data_ = _read_case(path, _SUMMARY_NAMES)
+            except UnreadableCase:          # reported as missing; the file stays
+                data_ = None
         if data_ is not None:
             summ = _case_summary(data_)
             if data_.partial:

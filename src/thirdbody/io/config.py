@@ -111,6 +111,8 @@ class MeshShapeConfig(_Model):
     subdivisions: Annotated[int, Field(strict=True, ge=0, le=5,
                                        description="Loop subdivisions")] = 0
     max_edge: Annotated[float | None, Field(strict=True, gt=0, description="m, after scale")] = None
+    sha256: str | None = Field(None, description="the file's SHA-256; written by thirdbody "
+                               "next to the resolved path, checked when given")
 
 
 class Particle(_Model):
@@ -276,12 +278,29 @@ class Config(_Model):
             shape = shapes.Potato(g.semi_axes, seed=g.seed, n_waves=g.n_waves,
                                   amplitude=g.amplitude, wavenumber_range=g.wavenumber_range)
         else:
-            path = Path(g.file)
-            if not path.is_absolute():
-                path = Path(self.base_dir) / path
+            path = self._mesh_path(g)
+            if g.sha256 is not None and path.is_file() and _sha256(path) != g.sha256:
+                raise ValueError(f"mesh file {path} has changed since this configuration was "
+                                 f"written (sha256 {_sha256(path)[:12]}..., expected "
+                                 f"{g.sha256[:12]}...)")
             shape = shapes.MeshShape.from_file(path, scale=g.scale, subdivisions=g.subdivisions,
                                                max_edge=g.max_edge)
         return shape
+
+    def _mesh_path(self, g: MeshShapeConfig) -> Path:
+        path = Path(g.file)
+        return path if path.is_absolute() else Path(self.base_dir) / path
+
+    def _geometries(self) -> list:
+        if self.particle is not None:
+            return [self.particle.geometry]
+        return [p.geometry for p in self.particles or []]
+
+    def mesh_digests(self) -> list[str]:
+        """SHA-256 of every mesh file the configuration uses (what a sweep's case hash covers,
+        so that an edited file is a new case)."""
+        return [_sha256(self._mesh_path(g)) for g in self._geometries()
+                if isinstance(g, MeshShapeConfig) and self._mesh_path(g).is_file()]
 
     def _particle(self, pc):
         import thirdbody as tb
@@ -323,8 +342,18 @@ class Config(_Model):
         return body, plates, load, self.numerics.model_dump()
 
     def to_toml(self) -> str:
-        """The resolved configuration (defaults filled in) as TOML text."""
+        """The resolved configuration (defaults filled in) as TOML text. A mesh file is written
+        as its absolute path with its SHA-256, so the text reruns from any directory and
+        refuses an edited file."""
         data = self.model_dump(exclude={"base_dir"}, exclude_none=True)
+        for table, geometry in zip(
+                [data["particle"]] if "particle" in data else data.get("particles", []),
+                self._geometries(), strict=True):
+            if isinstance(geometry, MeshShapeConfig):
+                path = self._mesh_path(geometry).resolve()
+                table["geometry"]["file"] = str(path)
+                if path.is_file():
+                    table["geometry"]["sha256"] = _sha256(path)
         head: dict = {}
         if "particle" in data:
             particle = data.pop("particle")
@@ -334,6 +363,16 @@ class Config(_Model):
         if "layer" in data:
             head["layer"] = data.pop("layer")
         return _dump_toml({**head, **data})
+
+
+def _sha256(path: Path) -> str:
+    import hashlib
+
+    digest = hashlib.sha256()
+    with Path(path).open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def _format_errors(exc: ValidationError, source: str) -> str:
