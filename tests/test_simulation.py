@@ -230,7 +230,8 @@ def test_paper_fig4_smaller_friction_turns_further_then_sticks():
         assert ds.turned.values.tolist() == [1, 0, 0, 0]
         assert (ds.ratio.values[1:] < 1).all()
         # symmetric about the xz-plane and turned about y: the 3-D turn stays about y
-        assert np.abs(ds.rotation.sel(component="x")).max() < 1e-12      # degrees
+        assert np.abs(ds.rotation.sel(component="x")).max() < 1e-10 * float(
+            np.abs(ds.rotation).max())                  # round-off of the about-y turn
         assert np.abs(ds.tangential_force.sel(component="y")).max() < 1e-8 * float(
             np.abs(ds.tangential_force).max())
         turns[mu] = float(ds.rotation.sel(component="y")[0])

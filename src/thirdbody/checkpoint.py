@@ -4,6 +4,10 @@ A snapshot holds the inputs (to refuse resuming a different run), the particles'
 records and maps so far, and each interface's last normal solve (the next step's warm start),
 so that a resumed run ends exactly as an uninterrupted one. It is a Python pickle: only load
 snapshots you made yourself.
+
+A results file stores the history (records and maps) one step at a time instead, next to a
+snapshot without it (``history=False``, a size that does not grow with the run), and puts the
+two together again with :func:`with_history` to resume.
 """
 
 from __future__ import annotations
@@ -14,16 +18,27 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     from .simulation import LayerState, Simulation
 
-__all__ = ["restore", "snapshot"]
+__all__ = ["restore", "snapshot", "with_history"]
 
 
-def snapshot(sim: Simulation, state: LayerState) -> bytes:
-    """Pickle everything needed to continue ``sim`` after its last completed step."""
-    return pickle.dumps({
-        "inputs": sim.inputs(), "state": state, "records": sim.records, "maps": sim.maps,
+def snapshot(sim: Simulation, state: LayerState, *, history: bool = True) -> bytes:
+    """Pickle everything needed to continue ``sim`` after its last completed step (without the
+    records and maps if not ``history``: :func:`with_history` adds them)."""
+    data = {
+        "inputs": sim.inputs(), "state": state,
         "interfaces": [{k: i.last for k, i in m.interfaces.items()} for m in sim.members],
         "points": [(m.points, m._points_key) for m in sim.members],
-    })
+    }
+    if history:
+        data.update(records=sim.records, maps=sim.maps)
+    return pickle.dumps(data, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def with_history(blob: bytes, records: list, maps: list) -> bytes:
+    """A snapshot made with ``history=False``, completed with the run's records and maps."""
+    data = pickle.loads(blob)
+    data.update(records=list(records), maps=list(maps))
+    return pickle.dumps(data, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def restore(sim: Simulation, blob: bytes) -> tuple[LayerState, int]:
@@ -34,6 +49,9 @@ def restore(sim: Simulation, blob: bytes) -> tuple[LayerState, int]:
     data = pickle.loads(blob)
     if data["inputs"] != sim.inputs():
         raise ValueError("cannot resume: the results were made with different inputs")
+    if "records" not in data:
+        raise ValueError("cannot resume: the snapshot holds no records (made with "
+                         "history=False; complete it with with_history)")
     sim.records, sim.maps = list(data["records"]), list(data["maps"])
     for m, lasts, (points, points_key) in zip(sim.members, data["interfaces"], data["points"],
                                               strict=True):

@@ -20,7 +20,7 @@ from ._version import __version__
 
 __all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES", "LayerRecord",
            "StepMaps", "StepRecord", "Variable", "direction_sign", "layer_dataset",
-           "orientation_label", "to_dataset"]
+           "map_frame", "orientation_label", "to_dataset"]
 
 #: State codes stored in the results (``state`` variable, with ``flag_values``/``flag_meanings``).
 STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
@@ -195,6 +195,14 @@ def _union(maps: list[StepMaps]) -> tuple[int, int, int, int]:
     return i0, j0, i1 - i0, j1 - j0
 
 
+def map_frame(maps: list) -> tuple[int, int, int, int]:
+    """The cells (i0, j0, nx, ny) that hold every stored map window: of a particle's
+    :class:`StepMaps`, or of a layer's per-step lists of them (None where not stored)."""
+    flat = [m for entry in maps for m in (entry if isinstance(entry, list | tuple) else [entry])
+            if m is not None]
+    return _union(flat)
+
+
 def _place(field: np.ndarray, window: tuple[int, int, int, int],
            frame: tuple[int, int, int, int], fill: float = 0.0) -> np.ndarray:
     i0, j0, nx, ny = frame
@@ -234,9 +242,13 @@ def _load_value_attrs(records) -> dict:
 
 
 def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float,
-               inputs: dict, status: str, attrs: dict | None = None):
+               inputs: dict, status: str, attrs: dict | None = None,
+               frame: tuple[int, int, int, int] | None = None, raw: bool = False):
     """Assemble the results: per-step variables along ``step`` (and their own dimensions),
-    maps along ``map_step`` on the union of the stored contact windows."""
+    maps along ``map_step`` on the union of the stored contact windows (or on ``frame``, cells
+    (i0, j0, nx, ny), which must hold them: a results file being appended to uses a frame with
+    room to grow). With ``raw``, the variables as a dict name: (dims, values[, attrs]), without
+    building the Dataset (a results file appending a step needs only those)."""
     import xarray as xr
 
     steps = np.array([r.step for r in records], dtype=int)
@@ -264,7 +276,7 @@ def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float
     for d in sorted(used):
         coords[d] = (d, COORDS[d])
     if maps:
-        frame = _union(maps)
+        frame = _union(maps) if frame is None else frame
         i0, j0, nx, ny = frame
         coords["map_step"] = ("map_step", np.array([m.step for m in maps], dtype=int),
                               _MAP_STEP_ATTRS)
@@ -278,6 +290,8 @@ def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float
                                 for m in maps])
             data[name] = (("map_step", "interface", *dims, "map_y", "map_x"), stacked,
                           {"units": units, "long_name": long_name})
+    if raw:
+        return {**data, **coords}
     all_attrs = {
         "title": "thirdbody: deformable particle between two plates",
         "thirdbody_version": __version__,
@@ -419,11 +433,13 @@ def _events(records: list[LayerRecord]) -> list[tuple[str, np.ndarray, dict]]:
 
 def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]], layer,
                   cell_sizes: list[float], inputs: dict, status: str,
-                  attrs: dict | None = None):
+                  attrs: dict | None = None, frame: tuple[int, int, int, int] | None = None,
+                  raw: bool = False):
     """Assemble a layer's results: layer variables along ``step``, per-particle variables along
     (``step``, ``particle``), maps along (``map_step``, ``particle``) on a lattice of each
     particle's own cells (``map_i``, ``map_j``: cell indices from its centroid; x = ``x0`` +
-    ``position`` + ``map_i`` · ``cell_size``)."""
+    ``position`` + ``map_i`` · ``cell_size``; the union of the stored windows, or ``frame``
+    as in :func:`to_dataset`; ``raw`` as there)."""
     import xarray as xr
 
     n = len(layer)
@@ -467,8 +483,7 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
     stored = [(next(m for m in m_list if m is not None).step, m_list)
               for m_list in maps if any(m is not None for m in m_list)]
     if stored:
-        present = [m for _, m_list in stored for m in m_list if m is not None]
-        i0, j0, nx, ny = _union(present)
+        i0, j0, nx, ny = map_frame(maps) if frame is None else frame
         coords["map_step"] = ("map_step", np.array([s for s, _ in stored], dtype=int),
                               _MAP_STEP_ATTRS)
         coords["map_i"] = ("map_i", i0 + np.arange(nx),
@@ -486,6 +501,8 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
                 for _, m_list in stored])
             data[name] = (("map_step", "particle", "interface", *dims, "map_j", "map_i"),
                           stacked, {"units": units, "long_name": long_name})
+    if raw:
+        return {**data, **coords}
     all_attrs = {
         "title": "thirdbody: a layer of deformable particles between two plates",
         "thirdbody_version": __version__,

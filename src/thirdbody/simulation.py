@@ -641,13 +641,19 @@ class Simulation:
         come from a run with the same inputs."""
         return restore(self, blob)
 
-    def dataset(self):
-        """The records and maps collected so far as an :class:`xarray.Dataset`."""
+    def dataset(self, records: list | None = None, maps: list | None = None,
+                frame: tuple[int, int, int, int] | None = None, raw: bool = False):
+        """The records and maps collected so far as an :class:`xarray.Dataset` (or the given
+        ``records`` and ``maps``; maps on the lattice cells ``frame`` = (i0, j0, nx, ny) if
+        given, else on the union of their windows; ``raw``: a dict of the variables, see
+        :func:`~thirdbody.records.to_dataset`)."""
+        records = self.records if records is None else records
+        maps = self.maps if maps is None else maps
         if self.single:
-            return to_dataset(self.records, self.maps, self.cell_size, self.inputs(),
-                              self.status)
-        return layer_dataset(self.records, self.maps, self.layer,
-                             [m.cell_size for m in self.members], self.inputs(), self.status)
+            return to_dataset(records, maps, self.cell_size, self.inputs(), self.status,
+                              frame=frame, raw=raw)
+        return layer_dataset(records, maps, self.layer, [m.cell_size for m in self.members],
+                             self.inputs(), self.status, frame=frame, raw=raw)
 
 
 @dataclass(frozen=True)

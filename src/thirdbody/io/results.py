@@ -1,36 +1,56 @@
-"""Results files: NetCDF (HDF5, via xarray and h5netcdf), written after every load step.
+"""Results files: NetCDF (HDF5, via xarray and h5netcdf), saved after every load step.
 
-Each write goes to a temporary file that then replaces the results file atomically
-(``os.replace``), so the file on disk is always a complete, valid dataset of the steps done so
-far: a reader can open it while the run goes on, and a run killed at any moment (Ctrl-C,
-SIGKILL, a crash) loses at most the step in progress. While a run is incomplete the file also
-holds its resume state (variable ``_resume_state``, the pickled solver state); ``--resume``
-continues from it, and the finished file is the same as an uninterrupted run's (the per-step
-wall-time variables ``time_*`` aside). The resume state is removed when the run ends. Only
-resume files you made yourself: the state is a Python pickle.
+The file on disk is always a complete, valid dataset of the steps done so far: a reader can
+open it while the run goes on, and a run killed at any moment (Ctrl-C, SIGKILL, a crash) loses
+at most the step in progress. Each save goes to a temporary file that then replaces the results
+file atomically (``os.replace``). A step is *appended*: the file is copied (a byte copy, a few
+ms for megabytes) and the new step's rows are written at the end of its unlimited dimensions
+(``step``, ``map_step``, ``event``); the whole dataset is encoded again only when the stored
+maps need a larger lattice window than the file has (the window then grows with room to
+spare, so this happens a few times per run). While a run goes on, the maps of the file can
+therefore sit on a larger window than the finished file's, padded with zeros (no contact).
+
+While a run is incomplete the file also holds what ``--resume`` needs: ``_resume_state`` (the
+pickled solver state, of a size that does not grow with the run) and ``_resume_step`` (each
+step's record and maps, pickled, along ``step``). The finished file is written whole, without
+them, and is the same as an uninterrupted run's (the per-step wall-time variables ``time_*``
+aside). Only resume files you made yourself: the state is a Python pickle.
 """
 
 from __future__ import annotations
 
+import base64
 import os
+import pickle
+import shutil
+import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RESUME_VARIABLE", "open_results", "run_to_file", "write_results"]
+__all__ = ["RESUME_VARIABLE", "STEP_HISTORY_VARIABLE", "open_results", "run_to_file",
+           "write_results"]
 
 RESUME_VARIABLE = "_resume_state"
+STEP_HISTORY_VARIABLE = "_resume_step"
+#: dimensions that grow as the run goes on (unlimited in an unfinished file)
+_GROWING = ("step", "map_step", "event", "resume_bytes", "map_y", "map_x", "map_j", "map_i")
+#: the maps' lattice dimensions (y, x) of a particle's and of a layer's results
+_MAP_DIMS = (("map_y", "map_x"), ("map_j", "map_i"))
+#: room to grow given to the maps' window when it must be enlarged: this fraction of its size
+#: on every side, at least _MARGIN_CELLS cells
+_MARGIN = 0.25
+_MARGIN_CELLS = 4
 
 
 def write_results(ds, path: str | Path, resume_state: bytes | None = None) -> None:
-    """Write ``ds`` to ``path`` atomically (temporary file, then rename)."""
+    """Write ``ds`` to ``path`` atomically (temporary file, then rename); with ``resume_state``
+    (a complete :func:`thirdbody.checkpoint.snapshot`) stored for ``--resume``."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     if resume_state is not None:
-        ds = ds.assign({RESUME_VARIABLE: (("resume_bytes",),
-                                          np.frombuffer(resume_state, dtype=np.uint8),
-                                          {"long_name": "pickled state to resume the run"})})
+        ds = ds.assign({RESUME_VARIABLE: _blob_variable(resume_state)})
     ds.to_netcdf(tmp, engine="h5netcdf")
     os.replace(tmp, path)
 
@@ -43,12 +63,248 @@ def open_results(path: str | Path):
         return ds.load()
 
 
+def _blob_variable(blob: bytes) -> tuple:
+    return (("resume_bytes",), np.frombuffer(blob, dtype=np.uint8),
+            {"long_name": "pickled state to resume the run"})
+
+
+def _encode(obj) -> str:
+    return base64.b64encode(pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)).decode("ascii")
+
+
+def _decode(text) -> object:
+    return pickle.loads(base64.b64decode(str(text)))
+
+
+def saved_snapshot(saved) -> bytes:
+    """The complete resume snapshot stored in an unfinished results dataset ``saved`` (as
+    written by :func:`run_to_file`, or by an earlier version that stored it in one piece)."""
+    from ..checkpoint import with_history
+
+    blob = saved[RESUME_VARIABLE].values.tobytes()
+    if STEP_HISTORY_VARIABLE not in saved:
+        return blob
+    records, maps = [], []
+    for text in saved[STEP_HISTORY_VARIABLE].values:
+        record, new_maps = _decode(text)
+        records.append(record)
+        maps.extend(new_maps)
+    return with_history(blob, records, maps)
+
+
+def _contains(outer: tuple[int, int, int, int], inner: tuple[int, int, int, int]) -> bool:
+    return (outer[0] <= inner[0] and outer[1] <= inner[1]
+            and inner[0] + inner[2] <= outer[0] + outer[2]
+            and inner[1] + inner[3] <= outer[1] + outer[3])
+
+
+def _padded(frame: tuple[int, int, int, int]) -> tuple[int, int, int, int]:
+    i0, j0, nx, ny = frame
+    mx = max(_MARGIN_CELLS, int(np.ceil(_MARGIN * nx)))
+    my = max(_MARGIN_CELLS, int(np.ceil(_MARGIN * ny)))
+    return i0 - mx, j0 - my, nx + 2 * mx, ny + 2 * my
+
+
+class _StepWriter:
+    """The per-step checkpoint of :func:`run_to_file`: appends each completed step to the file
+    (see the module docstring), or writes it whole when it must."""
+
+    def __init__(self, path: Path, attrs: dict, history: list[str]) -> None:
+        self.path, self.attrs = path, attrs
+        self.tmp = path.with_name(path.name + ".tmp")
+        self.history = list(history)    # _resume_step of the steps saved so far
+        self.frame: tuple[int, int, int, int] | None = None   # the file's maps window
+        self.n_maps: int | None = None  # len(sim.maps) when last saved; None: write whole
+        self.whole = 0                  # how many times the dataset was written whole
+        self.appended = 0
+        self.regrids = 0                # how many times the maps' window grew
+        self.seconds = {"whole": 0.0, "append": 0.0}    # wall time saving, by kind
+
+    def __call__(self, sim, state) -> None:
+        from ..checkpoint import snapshot
+        from ..records import map_frame
+
+        if self.n_maps is None:         # first save of this process (perhaps resumed)
+            new_maps = self._maps_after(sim, len(self.history))
+        else:
+            new_maps = sim.maps[self.n_maps:]
+        for record in sim.records[len(self.history):]:
+            mine = [m for m in new_maps if _map_step(m) == record.step]
+            self.history.append(_encode((record, mine)))
+        blob = snapshot(sim, state, history=False)
+        start = time.perf_counter()
+        if self.n_maps is None or (new_maps and self.frame is None):
+            if sim.maps:
+                self.frame = _padded(map_frame(sim.maps))
+            self._write_whole(sim, blob)
+            self.seconds["whole"] += time.perf_counter() - start
+        else:
+            old = self.frame
+            if new_maps and not _contains(self.frame, map_frame(new_maps)):
+                self.frame = _padded(_union_frames(old, map_frame(new_maps)))
+            self._append(sim, blob, new_maps, old)
+            self.seconds["append"] += time.perf_counter() - start
+        self.n_maps = len(sim.maps)
+
+    @staticmethod
+    def _maps_after(sim, saved_steps: int) -> list:
+        if saved_steps == 0:
+            return list(sim.maps)
+        last = sim.records[saved_steps - 1].step
+        return [m for m in sim.maps if _map_step(m) > last]
+
+    def _write_whole(self, sim, blob: bytes) -> None:
+        ds = sim.dataset(frame=self.frame).assign_attrs(self.attrs)
+        ds = ds.assign({
+            RESUME_VARIABLE: _blob_variable(blob),
+            STEP_HISTORY_VARIABLE: ("step", np.array(self.history, dtype=object),
+                                    {"long_name": "pickled record and maps of the step, to "
+                                                  "resume the run"}),
+        })
+        ds.to_netcdf(self.tmp, engine="h5netcdf",
+                     unlimited_dims=[d for d in _GROWING if d in ds.dims],
+                     encoding={name: {"chunksizes": _chunks(var)}
+                               for name, var in ds.variables.items() if var.dims})
+        os.replace(self.tmp, self.path)
+        self.whole += 1
+
+    def _append(self, sim, blob: bytes, new_maps: list, old_frame) -> None:
+        """Copy the file, grow its unlimited dimensions by the new step's rows and write them
+        (with h5py: h5netcdf's per-write bookkeeping costs ~0.1 s a step), then rename."""
+        import h5py
+
+        record = sim.records[-1]
+        tail = _Columns(sim.dataset(records=sim.records[-2:], maps=new_maps, frame=self.frame,
+                                    raw=True))
+        rows = {"step": np.flatnonzero(tail["step"].values == record.step)}
+        if new_maps:
+            rows["map_step"] = np.arange(tail.sizes["map_step"])
+        if "event" in tail.dims:
+            rows["event"] = np.flatnonzero(tail["event_step"].values == record.step)
+        shutil.copyfile(self.path, self.tmp)
+        with h5py.File(self.tmp, "r+") as f:
+            if self.frame != old_frame:
+                _regrid(f, tail, old_frame, self.frame)
+                self.regrids += 1
+            for dim, take in rows.items():
+                if not len(take):
+                    continue
+                n = h5py.h5d.open(f.id, dim.encode()).shape[0]
+                names = [name for name, var in tail.variables.items()
+                         if var.dims and var.dims[0] == dim]
+                if dim not in names:            # a dimension without a coordinate
+                    _extend(f, dim, n, None, n + len(take))
+                for name in names:
+                    _extend(f, name, n, tail.variables[name].values[take])
+                if dim == "step":
+                    _extend(f, STEP_HISTORY_VARIABLE, n,
+                            np.array(self.history[n:], dtype=object))
+            f["load_value"].attrs.update(
+                {k: tail["load_value"].attrs[k] for k in ("units", "long_name")})
+            _extend(f, "resume_bytes", 0, None, len(blob))
+            _extend(f, RESUME_VARIABLE, 0, np.frombuffer(blob, dtype=np.uint8))
+        os.replace(self.tmp, self.path)
+        self.appended += 1
+
+
+#: rows per HDF5 chunk along a growing dimension (one per map step for the maps): one chunk
+#: holds many steps, so that appending a step seldom allocates one
+_CHUNK_ROWS = {"step": 64, "event": 64, "resume_bytes": 1 << 14}
+
+
+def _chunks(var) -> tuple[int, ...]:
+    first = var.dims[0]
+    rows = _CHUNK_ROWS.get(first, 1 if first == "map_step" else 64 if first in _GROWING
+                           else var.shape[0])
+    return (max(1, rows), *[max(1, n) for n in var.shape[1:]])
+
+
+class _Column:
+    def __init__(self, entry: tuple) -> None:
+        dims = entry[0]
+        self.dims = (dims,) if isinstance(dims, str) else tuple(dims)
+        self.values = np.asarray(entry[1])
+        self.attrs = entry[2] if len(entry) > 2 else {}
+
+
+class _Columns:
+    """The few Dataset features :meth:`_StepWriter._append` needs, on the raw variables of
+    :func:`~thirdbody.records.to_dataset` (building a Dataset costs ~4 ms a step)."""
+
+    def __init__(self, raw: dict) -> None:
+        self.variables = {name: _Column(entry) for name, entry in raw.items()}
+        self.sizes = {d: n for v in self.variables.values()
+                      for d, n in zip(v.dims, v.values.shape, strict=True)}
+        self.dims = set(self.sizes)
+
+    def __getitem__(self, name: str) -> _Column:
+        return self.variables[name]
+
+
+def _union_frames(a: tuple[int, int, int, int], b: tuple[int, int, int, int]
+                  ) -> tuple[int, int, int, int]:
+    i0, j0 = min(a[0], b[0]), min(a[1], b[1])
+    return i0, j0, max(a[0] + a[2], b[0] + b[2]) - i0, max(a[1] + a[3], b[1] + b[3]) - j0
+
+
+def _regrid(f, tail, old: tuple[int, int, int, int], new: tuple[int, int, int, int]) -> None:
+    """Move the maps of the open h5py file ``f`` from the lattice window ``old`` to ``new``
+    (cells (i0, j0, nx, ny); zeros where ``new`` goes beyond ``old``, cropped where it is
+    smaller) and write the new window's coordinates, taken from ``tail`` (a dataset on
+    ``new``)."""
+    ydim, xdim = next(dims for dims in _MAP_DIMS if dims[1] in tail.dims)
+    di, dj = old[0] - new[0], old[1] - new[1]       # old cell (0, 0) in the new window
+    xs = slice(max(0, -di), min(old[2], new[2] - di))
+    ys = slice(max(0, -dj), min(old[3], new[3] - dj))
+    for name, var in tail.variables.items():
+        if var.dims[-2:] != (ydim, xdim):
+            continue
+        d = f[name]
+        values = d[...]
+        moved = np.zeros((*values.shape[:-2], new[3], new[2]), dtype=values.dtype)
+        moved[..., ys.start + dj:ys.stop + dj, xs.start + di:xs.stop + di] = values[..., ys, xs]
+        d.resize(moved.shape)
+        d[...] = moved
+    for dim in (ydim, xdim):
+        d = f[dim]
+        d.resize(tail.sizes[dim], axis=0)
+        d[...] = tail[dim].values
+
+
+def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = None) -> None:
+    """Resize dataset ``name`` of the open h5py file ``f`` along its first axis to ``n`` +
+    len(``rows``) (or ``total``) and write ``rows`` from index ``n`` on (h5py's low-level API:
+    its high-level one costs ~0.3 ms a dataset)."""
+    import h5py
+
+    d = h5py.h5d.open(f.id, name.encode())
+    shape = d.shape
+    total = n + len(rows) if total is None else total
+    d.set_extent((total, *shape[1:]))
+    if rows is None:
+        return
+    if rows.dtype.kind in "UO":                 # variable-length strings: the high-level API
+        f[name][n:] = rows.astype(object)
+        return
+    rows = np.ascontiguousarray(rows, dtype=rows.dtype)
+    space = d.get_space()
+    space.select_hyperslab((n, *[0] * (len(shape) - 1)), rows.shape)
+    d.write(h5py.h5s.create_simple(rows.shape), space, rows)
+
+
+def _map_step(maps) -> int:
+    """The step of a stored maps entry (a particle's StepMaps or a layer's list of them)."""
+    if isinstance(maps, list | tuple):
+        return next(m for m in maps if m is not None).step
+    return maps.step
+
+
 def run_to_file(sim, path: str | Path, *, resume: bool = False,
                 progress: Callable | None = None, attrs: dict | None = None):
-    """Run ``sim``, writing ``path`` after every step; with ``resume`` continue the run saved
+    """Run ``sim``, saving ``path`` after every step; with ``resume`` continue the run saved
     there. ``attrs`` are added to the file's global attributes. Returns the final dataset."""
     path = Path(path)
-    blob = None
+    blob, history = None, []
     if resume:
         if not path.exists():
             raise FileNotFoundError(f"nothing to resume: {path} does not exist")
@@ -56,13 +312,12 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
         if RESUME_VARIABLE not in saved:
             raise ValueError(f"{path} holds a finished run ({saved.attrs.get('status')}); "
                              "nothing to resume")
-        blob = saved[RESUME_VARIABLE].values.tobytes()
+        blob = saved_snapshot(saved)
+        if STEP_HISTORY_VARIABLE in saved:    # else an earlier version's file: all anew
+            history = [str(t) for t in saved[STEP_HISTORY_VARIABLE].values]
 
     extra = dict(attrs or {})
-
-    def checkpoint(simulation, state) -> None:
-        write_results(simulation.dataset().assign_attrs(extra), path, simulation.snapshot(state))
-
-    ds = sim.run(progress=progress, checkpoint=checkpoint, resume_from=blob).assign_attrs(extra)
-    write_results(ds, path)
+    writer = _StepWriter(path, extra, history)
+    ds = sim.run(progress=progress, checkpoint=writer, resume_from=blob).assign_attrs(extra)
+    write_results(ds, path)     # whole: a compact file, in the layout xarray writes
     return ds

@@ -1,0 +1,226 @@
+"""Results saved by appending each step (issue 15): after every step the file on disk is the run
+so far (its maps on a window with room to grow, which is enlarged in place), a layer's events
+are appended too, a run resumes from an appended file or from an earlier version's file, and a
+run killed at random moments always leaves a readable file of exactly the completed steps that
+resumes to the uninterrupted result."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import h5py
+import numpy as np
+import pytest
+import xarray as xr
+
+import thirdbody as tb
+import thirdbody.io.results as results
+from thirdbody.io import RESUME_VARIABLE, open_results, run_to_file, write_results
+from thirdbody.shapes import Ellipsoid, Potato, Sphere
+
+HIDDEN = [RESUME_VARIABLE, results.STEP_HISTORY_VARIABLE]
+
+
+def potato_sim(steps=8, maps_every=1):
+    shape = Potato((1.0e-3, 0.8e-3, 0.7e-3), seed=4, amplitude=0.1, wavenumber_range=(4, 8))
+    return tb.Simulation(tb.Particle(shape, tb.Material(1e9, 0.3), 20.0), tb.Plates(0.46),
+                         tb.LinearRamp(stop=10.0, steps=steps), resolution=30,
+                         maps_every=maps_every)
+
+
+def layer_sim():
+    layer = tb.Layer([
+        tb.PlacedParticle(tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)),
+                                      tb.Material(210e9, 0.3), 20.0), (0, 0)),
+        tb.PlacedParticle(tb.Particle(Sphere(0.62e-3), tb.Material(210e9, 0.3)),
+                          (4e-3, 0.0))])
+    return tb.Simulation(layer, tb.Plates(0.3), tb.ForceTable([1.0, 2.0, 3.0]), resolution=40,
+                         maps_every=1)
+
+
+def watch(monkeypatch, path):
+    """Check the file after every save: it holds steps 0..k-1 of the run so far, equal to the
+    dataset of those steps (maps on the file's window), and one pickled history entry a step."""
+    writers, seen = [], []
+    original = results._StepWriter.__call__
+
+    def checked(self, sim, state):
+        original(self, sim, state)
+        if self not in writers:
+            writers.append(self)
+        on_disk = open_results(path)
+        k = len(sim.records)
+        assert on_disk.step.values.tolist() == list(range(k))
+        assert on_disk.attrs["status"] == "running"
+        assert on_disk.sizes["step"] == on_disk[results.STEP_HISTORY_VARIABLE].size == k
+        xr.testing.assert_identical(on_disk.drop_vars(HIDDEN), sim.dataset(frame=self.frame))
+        seen.append(k)
+
+    monkeypatch.setattr(results._StepWriter, "__call__", checked)
+    return writers, seen
+
+
+def test_every_saved_file_is_the_run_so_far_and_the_last_is_the_whole_run(monkeypatch,
+                                                                          tmp_path):
+    path = tmp_path / "r.nc"
+    writers, seen = watch(monkeypatch, path)
+    monkeypatch.setattr(results, "_MARGIN", 0.0)        # no room to grow: every larger
+    monkeypatch.setattr(results, "_MARGIN_CELLS", 0)    # contact enlarges the window
+    sim = potato_sim()
+    ds = run_to_file(sim, path)
+    assert seen == list(range(1, 9))
+    (w,) = writers
+    # written whole once (the first step), then appended; the maps' window grew in place
+    assert (w.whole, w.appended) == (1, 7)
+    assert w.regrids >= 1
+    final = open_results(path)
+    assert RESUME_VARIABLE not in final and results.STEP_HISTORY_VARIABLE not in final
+    xr.testing.assert_identical(final, ds)
+    # the appended maps are the maps of an uninterrupted in-memory run, cell by cell
+    plain = potato_sim().run()
+    timers = [v for v in ds.data_vars if v.startswith("time_")]
+    xr.testing.assert_identical(final.drop_vars(timers), plain.drop_vars(timers))
+
+
+def test_a_layer_appends_its_events(monkeypatch, tmp_path):
+    path = tmp_path / "r.nc"
+    writers, seen = watch(monkeypatch, path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ds = run_to_file(layer_sim(), path)
+    assert seen == [1, 2, 3]
+    assert writers[0].appended == 2
+    assert ds.sizes["event"] >= 2                    # events after the first step were appended
+    xr.testing.assert_identical(open_results(path), ds)
+
+
+def stop_after(k):
+    def progress(record):
+        if record.step == k - 1:
+            raise KeyboardInterrupt
+    return progress
+
+
+@pytest.mark.parametrize("make", [potato_sim, layer_sim], ids=["particle", "layer"])
+def test_a_run_resumed_from_an_appended_file_ends_as_an_uninterrupted_one(make, tmp_path):
+    path = tmp_path / "r.nc"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        with pytest.raises(KeyboardInterrupt):
+            run_to_file(make(), path, progress=stop_after(2))
+        partial = open_results(path)
+        assert partial.sizes["step"] == 1               # the interrupted step is not saved
+        resumed = run_to_file(make(), path, resume=True)
+        straight = run_to_file(make(), tmp_path / "s.nc")
+    timers = [v for v in straight.data_vars if v.startswith("time_")]
+    xr.testing.assert_identical(open_results(path).drop_vars(timers),
+                                open_results(tmp_path / "s.nc").drop_vars(timers))
+    assert resumed.sizes["step"] == straight.sizes["step"]
+
+
+def test_a_file_of_the_earlier_format_still_resumes(tmp_path):
+    """Before issue 15 the whole snapshot (history included) was one variable."""
+    path = tmp_path / "r.nc"
+    sim = potato_sim(steps=4)
+
+    def old_style(simulation, state):
+        write_results(simulation.dataset(), path, simulation.snapshot(state))
+        if len(simulation.records) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        sim.run(checkpoint=old_style)
+    assert results.STEP_HISTORY_VARIABLE not in open_results(path)
+    run_to_file(potato_sim(steps=4), path, resume=True)
+    straight = potato_sim(steps=4).run()
+    timers = [v for v in straight.data_vars if v.startswith("time_")]
+    xr.testing.assert_identical(open_results(path).drop_vars(timers),
+                                straight.drop_vars(timers))
+
+
+CONFIG = """
+[particle]
+shape = "potato"
+semi_axes = [1.0e-3, 0.8e-3, 0.7e-3]
+seed = 4
+amplitude = 0.1
+wavenumber_range = [4.0, 8.0]
+E = 1.0e9
+nu = 0.3
+orientation_deg = 20.0
+
+[plates]
+mu_up = 0.46
+
+[load]
+program = "linear_ramp"
+stop = 10.0
+steps = 24
+
+[numerics]
+resolution = 40.0
+maps_every = 2
+"""
+
+
+def steps_on_disk(path):
+    """Steps in the results file (h5py: ~1 ms, where xarray takes about a step's time)."""
+    try:
+        with h5py.File(path, "r") as f:
+            return f["step"].shape[0]
+    except (OSError, KeyError):
+        return 0
+
+
+@pytest.mark.slow
+def test_random_sigkills_leave_exactly_the_completed_steps_and_resume_identically(tmp_path):
+    """Killed with SIGKILL at random moments (seeded): after every kill the file opens, its
+    steps are 0..n-1 with n at least the count seen before the kill, and they equal the first n
+    steps of an uninterrupted run; resuming after the last kill gives the uninterrupted file."""
+    config = tmp_path / "run.toml"
+    config.write_text(CONFIG)
+    cmd = [sys.executable, "-m", "thirdbody", "run", str(config), "--no-plots"]
+    straight = subprocess.run([*cmd, "-o", str(tmp_path / "straight")], capture_output=True)
+    assert straight.returncode == 0, straight.stderr
+    reference = open_results(tmp_path / "straight" / "results.nc")
+    timers = [v for v in reference.data_vars if v.startswith("time_")]
+    per_step = [v for v in reference.data_vars if "step" in reference[v].dims
+                and v not in timers]
+    rng = np.random.default_rng(15)
+    out = tmp_path / "killed"
+    results_nc = out / "results.nc"
+    kills = 0
+    while kills < 5:
+        before = steps_on_disk(results_nc)
+        resume = ["--resume"] if results_nc.exists() else []
+        log = (tmp_path / f"log{kills}").open("w")
+        proc = subprocess.Popen([*cmd, "-o", str(out), *resume], stdout=log, stderr=log)
+        target = before + int(rng.integers(1, 4))
+        deadline = time.time() + 120
+        while steps_on_disk(results_nc) < target and proc.poll() is None:
+            assert time.time() < deadline
+            time.sleep(0.01)
+        seen = steps_on_disk(results_nc)
+        time.sleep(float(rng.uniform(0.0, 0.3)))        # a random moment of the next step
+        if proc.poll() is not None:
+            assert proc.returncode == 0, (tmp_path / f"log{kills}").read_text()
+            break                                        # it finished: nothing left to kill
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait()
+        kills += 1
+        on_disk = open_results(results_nc)
+        n = on_disk.sizes["step"]
+        assert n >= seen and on_disk.attrs["status"] == "running"
+        assert on_disk.step.values.tolist() == list(range(n))
+        assert on_disk[results.STEP_HISTORY_VARIABLE].size == n
+        xr.testing.assert_identical(on_disk[per_step].assign_attrs(status="-"),
+                                    reference[per_step].isel(step=slice(0, n))
+                                    .assign_attrs(status="-"))
+    assert kills >= 3
+    finished = subprocess.run([*cmd, "-o", str(out), "--resume"], capture_output=True)
+    assert finished.returncode == 0, finished.stderr
+    xr.testing.assert_identical(open_results(results_nc).drop_vars(timers),
+                                reference.drop_vars(timers))
