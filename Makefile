@@ -58,10 +58,10 @@ sweep: $(VENV)/.installed-test
 
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 test-fast: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -m "not slow" -x -q
+	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not slow" -x -q
 
 lint: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples
