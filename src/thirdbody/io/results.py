@@ -76,20 +76,21 @@ def _decode(text) -> object:
     return pickle.loads(base64.b64decode(str(text)))
 
 
-def saved_snapshot(saved) -> bytes:
+def saved_snapshot(saved) -> tuple[bytes, int]:
     """The complete resume snapshot stored in an unfinished results dataset ``saved`` (as
-    written by :func:`run_to_file`, or by an earlier version that stored it in one piece)."""
+    written by :func:`run_to_file`, or by an earlier version that stored it in one piece), and
+    how many maps entries its per-step history holds (0 for the earlier format)."""
     from ..checkpoint import with_history
 
     blob = saved[RESUME_VARIABLE].values.tobytes()
     if STEP_HISTORY_VARIABLE not in saved:
-        return blob
+        return blob, 0
     records, maps = [], []
     for text in saved[STEP_HISTORY_VARIABLE].values:
         record, new_maps = _decode(text)
         records.append(record)
         maps.extend(new_maps)
-    return with_history(blob, records, maps)
+    return with_history(blob, records, maps), len(maps)
 
 
 def _contains(outer: tuple[int, int, int, int], inner: tuple[int, int, int, int]) -> bool:
@@ -109,12 +110,13 @@ class _StepWriter:
     """The per-step checkpoint of :func:`run_to_file`: appends each completed step to the file
     (see the module docstring), or writes it whole when it must."""
 
-    def __init__(self, path: Path, attrs: dict, history: list[str]) -> None:
+    def __init__(self, path: Path, attrs: dict, history: list[str], n_maps: int = 0) -> None:
         self.path, self.attrs = path, attrs
         self.tmp = path.with_name(path.name + ".tmp")
         self.history = list(history)    # _resume_step of the steps saved so far
+        self.n_maps = n_maps            # entries of sim.maps in that history
         self.frame: tuple[int, int, int, int] | None = None   # the file's maps window
-        self.n_maps: int | None = None  # len(sim.maps) when last saved; None: write whole
+        self.fresh = True               # nothing saved by this process yet: write whole
         self.whole = 0                  # how many times the dataset was written whole
         self.appended = 0
         self.regrids = 0                # how many times the maps' window grew
@@ -124,34 +126,32 @@ class _StepWriter:
         from ..checkpoint import snapshot
         from ..records import map_frame
 
-        if self.n_maps is None:         # first save of this process (perhaps resumed)
-            new_maps = self._maps_after(sim, len(self.history))
-        else:
-            new_maps = sim.maps[self.n_maps:]
-        for record in sim.records[len(self.history):]:
-            mine = [m for m in new_maps if _map_step(m) == record.step]
+        new_records = sim.records[len(self.history):]
+        new_maps = sim.maps[self.n_maps:]
+        for k, record in enumerate(new_records):
+            if len(new_records) == 1:           # the usual case: one step since the last save
+                mine = new_maps
+            else:                               # resuming a file of the earlier format
+                mine = [m for m in new_maps if (_map_step(m) == record.step if _shown(m)
+                                                 else k == len(new_records) - 1)]
             self.history.append(_encode((record, mine)))
+        shown = [m for m in new_maps if _shown(m)]
         blob = snapshot(sim, state, history=False)
         start = time.perf_counter()
-        if self.n_maps is None or (new_maps and self.frame is None):
-            if sim.maps:
-                self.frame = _padded(map_frame(sim.maps))
+        if self.fresh or (shown and self.frame is None):
+            stored = [m for m in sim.maps if _shown(m)]
+            if stored:
+                self.frame = _padded(map_frame(stored))
             self._write_whole(sim, blob)
+            self.fresh = False
             self.seconds["whole"] += time.perf_counter() - start
         else:
             old = self.frame
-            if new_maps and not _contains(self.frame, map_frame(new_maps)):
-                self.frame = _padded(_union_frames(old, map_frame(new_maps)))
-            self._append(sim, blob, new_maps, old)
+            if shown and not _contains(self.frame, map_frame(shown)):
+                self.frame = _padded(_union_frames(old, map_frame(shown)))
+            self._append(sim, blob, shown, old)
             self.seconds["append"] += time.perf_counter() - start
         self.n_maps = len(sim.maps)
-
-    @staticmethod
-    def _maps_after(sim, saved_steps: int) -> list:
-        if saved_steps == 0:
-            return list(sim.maps)
-        last = sim.records[saved_steps - 1].step
-        return [m for m in sim.maps if _map_step(m) > last]
 
     def _write_whole(self, sim, blob: bytes) -> None:
         ds = sim.dataset(frame=self.frame).assign_attrs(self.attrs)
@@ -292,6 +292,13 @@ def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = N
     d.write(h5py.h5s.create_simple(rows.shape), space, rows)
 
 
+def _shown(maps) -> bool:
+    """Whether a stored maps entry has a map to show (a layer's entry can be all None)."""
+    if isinstance(maps, list | tuple):
+        return any(m is not None for m in maps)
+    return maps is not None
+
+
 def _map_step(maps) -> int:
     """The step of a stored maps entry (a particle's StepMaps or a layer's list of them)."""
     if isinstance(maps, list | tuple):
@@ -304,7 +311,7 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
     """Run ``sim``, saving ``path`` after every step; with ``resume`` continue the run saved
     there. ``attrs`` are added to the file's global attributes. Returns the final dataset."""
     path = Path(path)
-    blob, history = None, []
+    blob, history, n_maps = None, [], 0
     if resume:
         if not path.exists():
             raise FileNotFoundError(f"nothing to resume: {path} does not exist")
@@ -312,12 +319,12 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
         if RESUME_VARIABLE not in saved:
             raise ValueError(f"{path} holds a finished run ({saved.attrs.get('status')}); "
                              "nothing to resume")
-        blob = saved_snapshot(saved)
+        blob, n_maps = saved_snapshot(saved)
         if STEP_HISTORY_VARIABLE in saved:    # else an earlier version's file: all anew
             history = [str(t) for t in saved[STEP_HISTORY_VARIABLE].values]
 
     extra = dict(attrs or {})
-    writer = _StepWriter(path, extra, history)
+    writer = _StepWriter(path, extra, history, n_maps)
     ds = sim.run(progress=progress, checkpoint=writer, resume_from=blob).assign_attrs(extra)
     write_results(ds, path)     # whole: a compact file, in the layout xarray writes
     return ds
