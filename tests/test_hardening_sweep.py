@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from conftest import local_client
 from thirdbody.cli import app
 from thirdbody.io import load_config, open_results
 from thirdbody.sweep import case_id, load_sweep, run_sweep
@@ -44,13 +45,7 @@ def _tree(root: Path) -> dict:
 
 @pytest.fixture(scope="module")
 def client():
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=":0")
-    with Client(cluster) as c:
-        yield c
-    cluster.close()
+    yield from local_client(1)
 
 
 def _sweep(tmp_path: Path, text: str = TINY) -> Path:

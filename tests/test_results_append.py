@@ -18,6 +18,7 @@ import xarray as xr
 
 import thirdbody as tb
 import thirdbody.io.results as results
+from test_cli import SMALL
 from thirdbody.io import RESUME_VARIABLE, open_results, run_to_file, write_results
 from thirdbody.shapes import Ellipsoid, Potato, Sphere
 
@@ -141,29 +142,8 @@ def test_a_file_of_the_earlier_format_still_resumes(tmp_path):
                                 straight.drop_vars(timers))
 
 
-CONFIG = """
-[particle]
-shape = "potato"
-semi_axes = [1.0e-3, 0.8e-3, 0.7e-3]
-seed = 4
-amplitude = 0.1
-wavenumber_range = [4.0, 8.0]
-E = 1.0e9
-nu = 0.3
-orientation_deg = 20.0
-
-[plates]
-mu_up = 0.46
-
-[load]
-program = "linear_ramp"
-stop = 10.0
-steps = 24
-
-[numerics]
-resolution = 40.0
-maps_every = 2
-"""
+# the CLI tests' potato, 24 steps, maps every 2nd step
+CONFIG = SMALL.replace("{steps}", "24").replace("maps_every = 3", "maps_every = 2")
 
 
 def steps_on_disk(path):

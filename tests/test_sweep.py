@@ -13,6 +13,7 @@ import pytest
 import xarray as xr
 from typer.testing import CliRunner
 
+from conftest import local_client
 from thirdbody import rigid
 from thirdbody.cli import app
 from thirdbody.io import open_results
@@ -188,13 +189,7 @@ def test_cli_dry_run_lists_the_cases(tmp_path):
 # --- on a real cluster -------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def client():
-    from dask.distributed import Client, LocalCluster
-
-    cluster = LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=":0")
-    with Client(cluster) as c:
-        yield c
-    cluster.close()
+    yield from local_client(2)
 
 
 @pytest.fixture(scope="module")

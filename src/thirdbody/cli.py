@@ -70,20 +70,27 @@ def _lock(out: Path):
     return handle
 
 
+def _open_or_fail(results: Path, missing: str = ""):
+    """The results file loaded, or exit 2 if it is missing (message prefixed by ``missing``)
+    or unreadable."""
+    from .io import open_results
+
+    if not results.exists():
+        _fail(f"{missing}{results} does not exist")
+    try:
+        return open_results(results)
+    except (OSError, ValueError) as exc:
+        _fail(f"cannot read {results}: {exc}")
+
+
 def _resumable(results: Path, sim) -> None:
     """Every check of ``--resume`` that needs only reading: the file exists, holds an
     unfinished run, and was made with the same inputs (exit 2 otherwise)."""
     import json
 
-    from .io import open_results
     from .io.results import RESUME_VARIABLE
 
-    if not results.exists():
-        _fail(f"nothing to resume: {results} does not exist")
-    try:
-        saved = open_results(results)
-    except (OSError, ValueError) as exc:
-        _fail(f"cannot read {results}: {exc}")
+    saved = _open_or_fail(results, "nothing to resume: ")
     if RESUME_VARIABLE not in saved:
         _fail(f"{results} holds a finished run ({saved.attrs.get('status')}); nothing to "
               "resume")
@@ -310,15 +317,9 @@ def plot(results: Annotated[Path, typer.Argument(
                                                   help="directory (default: next to it)")] = None,
          ) -> None:
     """Redraw every figure from a results file (or the state map from a sweep summary)."""
-    from .io import open_results
     from .plot import save_all
 
-    if not results.exists():
-        _fail(f"{results} does not exist")
-    try:
-        ds = open_results(results)
-    except (OSError, ValueError) as exc:
-        _fail(f"cannot read {results}: {exc}")
+    ds = _open_or_fail(results)
     title = str(ds.attrs.get("title", ""))
     if not title.startswith("thirdbody") and "behaviour" not in ds:
         _fail(f"{results} is not a thirdbody results file (no 'thirdbody' title attribute); "
