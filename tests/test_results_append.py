@@ -111,9 +111,10 @@ def test_a_run_resumed_from_an_appended_file_ends_as_an_uninterrupted_one(make, 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         with pytest.raises(KeyboardInterrupt):
-            run_to_file(make(), path, progress=stop_after(2))
+            run_to_file(make(), path, progress=stop_after(3))
         partial = open_results(path)
-        assert partial.sizes["step"] == 1               # the interrupted step is not saved
+        # steps 0 and 1 saved (the second appended), the interrupted step 2 not
+        assert partial.sizes["step"] == 2
         resumed = run_to_file(make(), path, resume=True)
         straight = run_to_file(make(), tmp_path / "s.nc")
     timers = [v for v in straight.data_vars if v.startswith("time_")]
