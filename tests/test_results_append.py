@@ -208,9 +208,9 @@ def test_random_sigkills_leave_exactly_the_completed_steps_and_resume_identicall
 
 
 def test_a_layer_step_whose_particles_are_all_unloaded_saves_and_resumes(monkeypatch, tmp_path):
-    """A layer stores a maps entry per stored step, all None when no particle is loaded (under
-    gap control after a roll-off); such an entry has no map to append, and resuming must still
-    give the same maps. Simulated here by blanking step 1's maps."""
+    """A layer's step yields a maps entry that is all None when no particle is loaded (under
+    gap control after a roll-off): there is no map to store, and saving and resuming must give
+    the same maps as the uninterrupted run. Simulated here by blanking step 1's maps."""
     original = tb.Simulation.step
 
     def blank_step_1(self, k, state):

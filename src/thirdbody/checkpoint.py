@@ -15,6 +15,8 @@ from __future__ import annotations
 import pickle
 from typing import TYPE_CHECKING
 
+from .records import has_maps
+
 if TYPE_CHECKING:
     from .simulation import LayerState, Simulation
 
@@ -52,7 +54,8 @@ def restore(sim: Simulation, blob: bytes) -> tuple[LayerState, int]:
     if "records" not in data:
         raise ValueError("cannot resume: the snapshot holds no records (made with "
                          "history=False; complete it with with_history)")
-    sim.records, sim.maps = list(data["records"]), list(data["maps"])
+    # (a layer's snapshot made before Simulation.run dropped empty maps entries may hold some)
+    sim.records, sim.maps = list(data["records"]), [m for m in data["maps"] if has_maps(m)]
     for m, lasts, (points, points_key) in zip(sim.members, data["interfaces"], data["points"],
                                               strict=True):
         for k, last in lasts.items():

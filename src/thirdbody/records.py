@@ -19,8 +19,9 @@ import numpy as np
 from ._version import __version__
 
 __all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES", "LayerRecord",
-           "StepMaps", "StepRecord", "Variable", "direction_sign", "layer_dataset",
-           "map_frame", "orientation_label", "to_dataset"]
+           "StepMaps", "StepRecord", "Variable", "direction_sign", "has_maps",
+           "layer_dataset", "map_frame", "maps_step", "orientation_label", "to_dataset",
+           "union_frames"]
 
 #: State codes stored in the results (``state`` variable, with ``flag_values``/``flag_meanings``).
 STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
@@ -187,12 +188,34 @@ class StepMaps:
     status: dict[str, np.ndarray]
 
 
-def _union(maps: list[StepMaps]) -> tuple[int, int, int, int]:
-    i0 = min(w[0] for m in maps for w in m.windows.values())
-    j0 = min(w[1] for m in maps for w in m.windows.values())
-    i1 = max(w[0] + w[2] for m in maps for w in m.windows.values())
-    j1 = max(w[1] + w[3] for m in maps for w in m.windows.values())
+def union_frames(frames) -> tuple[int, int, int, int]:
+    """The smallest window (i0, j0, nx, ny) of lattice cells holding every window of
+    ``frames``."""
+    frames = list(frames)
+    i0 = min(w[0] for w in frames)
+    j0 = min(w[1] for w in frames)
+    i1 = max(w[0] + w[2] for w in frames)
+    j1 = max(w[1] + w[3] for w in frames)
     return i0, j0, i1 - i0, j1 - j0
+
+
+def _union(maps: list[StepMaps]) -> tuple[int, int, int, int]:
+    return union_frames(w for m in maps for w in m.windows.values())
+
+
+def has_maps(entry) -> bool:
+    """Whether a stored maps entry holds a map: a particle's :class:`StepMaps`, or a layer's
+    per-particle list of them (None for a particle without one)."""
+    if isinstance(entry, list | tuple):
+        return any(m is not None for m in entry)
+    return entry is not None
+
+
+def maps_step(entry) -> int:
+    """The load step of a stored maps entry that :func:`has_maps`."""
+    if isinstance(entry, list | tuple):
+        return next(m for m in entry if m is not None).step
+    return entry.step
 
 
 def map_frame(maps: list) -> tuple[int, int, int, int]:
@@ -480,8 +503,7 @@ def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]],
     }
     for d in ("interface", "component", "quaternion_component"):
         coords[d] = (d, COORDS[d])
-    stored = [(next(m for m in m_list if m is not None).step, m_list)
-              for m_list in maps if any(m is not None for m in m_list)]
+    stored = [(maps_step(m_list), m_list) for m_list in maps if has_maps(m_list)]
     if stored:
         i0, j0, nx, ny = map_frame(maps) if frame is None else frame
         coords["map_step"] = ("map_step", np.array([s for s, _ in stored], dtype=int),

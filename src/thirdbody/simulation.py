@@ -45,7 +45,7 @@ from .particle.member import Compliance, Member, ParticleState, step_maps
 from .particle.model import Particle, Plates
 from .particle.statics import Evaluation, StaticsError
 from .particle.turning import find_stable_orientation, turn_kinematics
-from .records import STATES, LayerRecord, StepMaps, StepRecord, layer_dataset, to_dataset
+from .records import STATES, LayerRecord, StepMaps, StepRecord, has_maps, layer_dataset, to_dataset
 from .rigid import RigidState, classify
 
 __all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError",
@@ -620,7 +620,7 @@ class Simulation:
         try:
             for record, maps, current in self.steps(state, start):
                 self.records.append(record)
-                if maps is not None:
+                if has_maps(maps):          # not a layer's step with no particle loaded
                     self.maps.append(maps)
                 if progress is not None:
                     progress(record)

@@ -3,12 +3,13 @@
 The file on disk is always a complete, valid dataset of the steps done so far: a reader can
 open it while the run goes on, and a run killed at any moment (Ctrl-C, SIGKILL, a crash) loses
 at most the step in progress. Each save goes to a temporary file that then replaces the results
-file atomically (``os.replace``). A step is *appended*: the file is copied (a byte copy, a few
-ms for megabytes) and the new step's rows are written at the end of its unlimited dimensions
-(``step``, ``map_step``, ``event``); the whole dataset is encoded again only when the stored
-maps need a larger lattice window than the file has (the window then grows with room to
-spare, so this happens a few times per run). While a run goes on, the maps of the file can
-therefore sit on a larger window than the finished file's, padded with zeros (no contact).
+file atomically (``os.replace``). The first step a process saves is written whole; every
+later one is *appended*: the file is copied (a byte copy, about 1 ms per MB) and the new
+step's rows are written at the end of its unlimited dimensions (``step``, ``map_step``,
+``event``). The maps sit on a lattice window with room to grow; when a contact outgrows it,
+the window is enlarged in place (with room to spare again, so this happens a few times per
+run). While a run goes on, the maps of the file can therefore sit on a larger window than the
+finished file's, padded with zeros (no contact).
 
 While a run is incomplete the file also holds what ``--resume`` needs: ``_resume_state`` (the
 pickled solver state, of a size that does not grow with the run) and ``_resume_step`` (each
@@ -117,6 +118,7 @@ class _StepWriter:
         self.n_maps = n_maps            # entries of sim.maps in that history
         self.frame: tuple[int, int, int, int] | None = None   # the file's maps window
         self.fresh = True               # nothing saved by this process yet: write whole
+        self.load_value_attrs: dict | None = None   # as in the file since the last whole write
         self.whole = 0                  # how many times the dataset was written whole
         self.appended = 0
         self.regrids = 0                # how many times the maps' window grew
@@ -124,37 +126,33 @@ class _StepWriter:
 
     def __call__(self, sim, state) -> None:
         from ..checkpoint import snapshot
-        from ..records import map_frame
+        from ..records import map_frame, maps_step, union_frames
 
         new_records = sim.records[len(self.history):]
         new_maps = sim.maps[self.n_maps:]
-        for k, record in enumerate(new_records):
-            if len(new_records) == 1:           # the usual case: one step since the last save
-                mine = new_maps
-            else:                               # resuming a file of the earlier format
-                mine = [m for m in new_maps if (_map_step(m) == record.step if _shown(m)
-                                                 else k == len(new_records) - 1)]
+        for record in new_records:      # one, but several when resuming the earlier format
+            mine = (new_maps if len(new_records) == 1 else
+                    [m for m in new_maps if maps_step(m) == record.step])
             self.history.append(_encode((record, mine)))
-        shown = [m for m in new_maps if _shown(m)]
         blob = snapshot(sim, state, history=False)
         start = time.perf_counter()
-        if self.fresh or (shown and self.frame is None):
-            stored = [m for m in sim.maps if _shown(m)]
-            if stored:
-                self.frame = _padded(map_frame(stored))
+        if self.fresh or (new_maps and self.frame is None):
+            if sim.maps:
+                self.frame = _padded(map_frame(sim.maps))
             self._write_whole(sim, blob)
             self.fresh = False
             self.seconds["whole"] += time.perf_counter() - start
         else:
             old = self.frame
-            if shown and not _contains(self.frame, map_frame(shown)):
-                self.frame = _padded(_union_frames(old, map_frame(shown)))
-            self._append(sim, blob, shown, old)
+            if new_maps and not _contains(self.frame, map_frame(new_maps)):
+                self.frame = _padded(union_frames([old, map_frame(new_maps)]))
+            self._append(sim, blob, new_maps, old)
             self.seconds["append"] += time.perf_counter() - start
         self.n_maps = len(sim.maps)
 
     def _write_whole(self, sim, blob: bytes) -> None:
         ds = sim.dataset(frame=self.frame).assign_attrs(self.attrs)
+        self.load_value_attrs = {k: ds["load_value"].attrs[k] for k in ("units", "long_name")}
         ds = ds.assign({
             RESUME_VARIABLE: _blob_variable(blob),
             STEP_HISTORY_VARIABLE: ("step", np.array(self.history, dtype=object),
@@ -199,8 +197,10 @@ class _StepWriter:
                 if dim == "step":
                     _extend(f, STEP_HISTORY_VARIABLE, n,
                             np.array(self.history[n:], dtype=object))
-            f["load_value"].attrs.update(
-                {k: tail["load_value"].attrs[k] for k in ("units", "long_name")})
+            units = {k: tail["load_value"].attrs[k] for k in ("units", "long_name")}
+            if units != self.load_value_attrs:          # a program mixing force and gap
+                f["load_value"].attrs.update(units)
+                self.load_value_attrs = units
             _extend(f, "resume_bytes", 0, None, len(blob))
             _extend(f, RESUME_VARIABLE, 0, np.frombuffer(blob, dtype=np.uint8))
         os.replace(self.tmp, self.path)
@@ -209,13 +209,12 @@ class _StepWriter:
 
 #: rows per HDF5 chunk along a growing dimension (one per map step for the maps): one chunk
 #: holds many steps, so that appending a step seldom allocates one
-_CHUNK_ROWS = {"step": 64, "event": 64, "resume_bytes": 1 << 14}
+_CHUNK_ROWS = {"step": 64, "event": 64, "resume_bytes": 1 << 14, "map_step": 1}
 
 
 def _chunks(var) -> tuple[int, ...]:
     first = var.dims[0]
-    rows = _CHUNK_ROWS.get(first, 1 if first == "map_step" else 64 if first in _GROWING
-                           else var.shape[0])
+    rows = _CHUNK_ROWS.get(first, 64 if first in _GROWING else var.shape[0])   # 64: map x, y
     return (max(1, rows), *[max(1, n) for n in var.shape[1:]])
 
 
@@ -239,12 +238,6 @@ class _Columns:
 
     def __getitem__(self, name: str) -> _Column:
         return self.variables[name]
-
-
-def _union_frames(a: tuple[int, int, int, int], b: tuple[int, int, int, int]
-                  ) -> tuple[int, int, int, int]:
-    i0, j0 = min(a[0], b[0]), min(a[1], b[1])
-    return i0, j0, max(a[0] + a[2], b[0] + b[2]) - i0, max(a[1] + a[3], b[1] + b[3]) - j0
 
 
 def _regrid(f, tail, old: tuple[int, int, int, int], new: tuple[int, int, int, int]) -> None:
@@ -290,20 +283,6 @@ def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = N
     space = d.get_space()
     space.select_hyperslab((n, *[0] * (len(shape) - 1)), rows.shape)
     d.write(h5py.h5s.create_simple(rows.shape), space, rows)
-
-
-def _shown(maps) -> bool:
-    """Whether a stored maps entry has a map to show (a layer's entry can be all None)."""
-    if isinstance(maps, list | tuple):
-        return any(m is not None for m in maps)
-    return maps is not None
-
-
-def _map_step(maps) -> int:
-    """The step of a stored maps entry (a particle's StepMaps or a layer's list of them)."""
-    if isinstance(maps, list | tuple):
-        return next(m for m in maps if m is not None).step
-    return maps.step
 
 
 def run_to_file(sim, path: str | Path, *, resume: bool = False,
