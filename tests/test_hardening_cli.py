@@ -189,13 +189,47 @@ def test_a_second_run_into_a_locked_directory_names_the_holder(tmp_path):
     out.mkdir()
     with (out / LOCK_NAME).open("a+") as held:
         fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        held.write("4242\n")
+        held.write(f"{os.getpid()}\n")             # a live holder
         held.flush()
+        start = time.monotonic()
         code, text = _cli("run", str(config), "-o", str(out))
-        _refused(code, text, "in use", "pid 4242")
+        _refused(code, text, "in use", f"pid {os.getpid()}")
+        assert "waiting" not in text and time.monotonic() - start < 30   # refused at once
     assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]      # nothing else written
     code, text = _cli("run", str(config), "-o", str(out), "--no-plots")
     assert code == 0, text                                        # released: it runs
+
+
+def _dead_pid() -> int:
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_lock_held_for_a_killed_run_is_waited_for(tmp_path):
+    """A killed run's child process that saves its last steps holds the lock (the file names
+    the dead run): the next run waits for it instead of refusing."""
+    config = tmp_path / "c.toml"
+    config.write_text(SMALL)
+    out = tmp_path / "out"
+    out.mkdir()
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, sys\n"
+         f"h = open({str(out / LOCK_NAME)!r}, 'a+'); fcntl.flock(h, fcntl.LOCK_EX)\n"
+         f"h.write('{_dead_pid()}\\n'); h.flush(); print('held', flush=True)\n"
+         "sys.stdin.readline()"],                  # holds the lock until told to let go
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline() == "held\n"
+    run = subprocess.Popen([sys.executable, "-m", "thirdbody", "run", str(config), "-o",
+                            str(out), "--no-plots"], stdout=subprocess.PIPE,
+                           stderr=subprocess.PIPE, text=True)
+    first = run.stderr.readline()
+    assert "waiting for the killed run" in first, first
+    assert run.poll() is None                   # still waiting
+    holder.communicate("go\n", timeout=30)
+    _, stderr = run.communicate(timeout=120)
+    assert run.returncode == 0, stderr
+    assert (out / "results.nc").exists()
 
 
 # --- Ctrl-C ------------------------------------------------------------------------------------

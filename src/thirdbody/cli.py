@@ -47,6 +47,42 @@ def _check_out(out: Path) -> None:
 LOCK_NAME = ".thirdbody.lock"
 
 
+#: seconds a run waits for the lock of a run that was killed while its child process finishes
+#: saving the steps it was sent (see thirdbody.io.results._BackgroundWriter)
+LOCK_WAIT = 60.0
+
+
+def _gone(pid: str) -> bool:
+    """Whether no process has the id ``pid`` (the lock file's text)."""
+    import os
+
+    try:
+        os.kill(int(pid), 0)
+    except ProcessLookupError:
+        return True
+    except (ValueError, OSError):
+        return False
+    return False
+
+
+def _wait_for_lock(handle, holder: str) -> bool:
+    """The run that holds the lock (pid ``holder``) is dead: its child process that saves the
+    results still holds it for the steps it was sent. Wait for it (at most LOCK_WAIT s)."""
+    import fcntl
+
+    typer.echo(f"waiting for the killed run's (pid {holder}) saving of its last steps to "
+               "finish", err=True)
+    deadline = time.monotonic() + LOCK_WAIT
+    while time.monotonic() < deadline:
+        time.sleep(0.05)
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            return True
+        except OSError:
+            continue
+    return False
+
+
 def _lock(out: Path):
     """An exclusive lock on the output directory for as long as the run lasts (fcntl; released
     when the process ends, however it ends). A second run into the same directory exits 2 and
@@ -60,9 +96,10 @@ def _lock(out: Path):
     except OSError:
         handle.seek(0)
         holder = handle.read().strip() or "unknown"
-        handle.close()
-        _fail(f"-o {out} is in use by another thirdbody run (pid {holder}); wait for it or "
-              "choose another --out")
+        if not (_gone(holder) and _wait_for_lock(handle, holder)):
+            handle.close()
+            _fail(f"-o {out} is in use by another thirdbody run (pid {holder}); wait for it or "
+                  "choose another --out")
     handle.seek(0)
     handle.truncate()
     handle.write(f"{os.getpid()}\n")
@@ -206,7 +243,7 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", SimulationStoppedWarning)
                 ds = run_to_file(sim, results, resume=resume, progress=progress,
-                                 attrs={"config": cfg.to_toml()})
+                                 attrs={"config": cfg.to_toml()}, background=True)
         except (FileNotFoundError, ValueError) as exc:
             _fail(str(exc))
     elapsed = time.perf_counter() - start

@@ -16,6 +16,10 @@ pickled solver state, of a size that does not grow with the run) and ``_resume_s
 step's record and maps, pickled, along ``step``). The finished file is written whole, without
 them, and is the same as an uninterrupted run's (the per-step wall-time variables ``time_*``
 aside). Only resume files you made yourself: the state is a Python pickle.
+
+With ``run_to_file(..., background=True)`` (what ``thirdbody run`` does) the steps are written
+by a child process while the run computes the next one (:class:`_BackgroundWriter`): the run
+spends about 1 ms a step handing a step over instead of the 5-25 ms of writing it.
 """
 
 from __future__ import annotations
@@ -126,6 +130,12 @@ class _StepWriter:
 
     def __call__(self, sim, state) -> None:
         from ..checkpoint import snapshot
+
+        self.save(sim, snapshot(sim, state, history=False))
+
+    def save(self, sim, blob: bytes) -> None:
+        """Save the steps of ``sim`` not saved yet, with the resume snapshot ``blob`` (made
+        with ``history=False``)."""
         from ..records import map_frame, maps_step, union_frames
 
         new_records = sim.records[len(self.history):]
@@ -134,7 +144,6 @@ class _StepWriter:
             mine = (new_maps if len(new_records) == 1 else
                     [m for m in new_maps if maps_step(m) == record.step])
             self.history.append(_encode((record, mine)))
-        blob = snapshot(sim, state, history=False)
         start = time.perf_counter()
         if self.fresh or (new_maps and self.frame is None):
             if sim.maps:
@@ -205,6 +214,194 @@ class _StepWriter:
             _extend(f, RESUME_VARIABLE, 0, np.frombuffer(blob, dtype=np.uint8))
         os.replace(self.tmp, self.path)
         self.appended += 1
+
+
+class _BackgroundWriter:
+    """The per-step checkpoint of :func:`run_to_file` with ``background``: a :class:`_StepWriter`
+    run in a child process (forked when the run starts), so that the simulation computes the
+    next step while the last one is written. Each step the run pickles what the child needs
+    (the records and maps not sent yet, the resume snapshot: it needs the solver state) and
+    writes it to a pipe without waiting; what the pipe cannot take yet (while the child writes
+    the first step's whole file, say) waits in this process and goes at the next step, or when
+    more than ``_BACKLOG_BYTES`` wait.
+
+    The child ignores SIGINT (Ctrl-C goes to the whole process group): :meth:`close` lets it
+    save every step it was sent, then it exits. If the run is killed, the child still saves the
+    steps in the pipe and exits at its end; it inherits the run's open files, so the CLI's lock
+    on the output directory is held until it is done. An error in the child (a full disk, say)
+    is raised in the run at its next step, or by :meth:`close`; if the child dies, the run stops
+    with a RuntimeError. Either way the file holds the steps saved before."""
+
+    def __init__(self, writer: _StepWriter, sim) -> None:
+        import multiprocessing
+        import signal
+        import warnings
+
+        ctx = multiprocessing.get_context("fork")
+        self.path = writer.path
+        self.sent: tuple[int, int] | None = None    # records, maps sent (None: nothing yet)
+        self.stats: dict = {}                        # the child's counters, after close()
+        self.seconds = 0.0                           # wall time of the run spent here
+        self.backlog = bytearray()                   # pickled steps the pipe did not take yet
+        reader, self.fd = os.pipe()
+        self.replies, replies_in = ctx.Pipe(duplex=False)
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            with warnings.catch_warnings():     # fork with threads (rich's progress bar): the
+                warnings.simplefilter("ignore", DeprecationWarning)  # child takes no lock of theirs
+                self.proc = ctx.Process(target=_write_in_child, name="thirdbody-writer",
+                                        args=(writer, sim, reader, replies_in,
+                                              (self.fd, self.replies)))
+                self.proc.start()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
+        os.close(reader)
+        replies_in.close()
+        _widen(self.fd)
+        os.set_blocking(self.fd, False)
+
+    def __call__(self, sim, state) -> None:
+        from ..checkpoint import snapshot
+
+        start = time.perf_counter()
+        self._check()
+        n, m = self.sent or (0, 0)          # the first time: the whole history (a resumed run)
+        item = pickle.dumps((sim.records[n:], sim.maps[m:], snapshot(sim, state, history=False),
+                             sim.status), protocol=pickle.HIGHEST_PROTOCOL)
+        self.backlog += len(item).to_bytes(8, "little") + item
+        self._pump(block=len(self.backlog) > _BACKLOG_BYTES)
+        self.sent = (len(sim.records), len(sim.maps))
+        self.seconds += time.perf_counter() - start
+
+    def _pump(self, block: bool) -> None:
+        """Write the backlog to the pipe: what it takes now, or all of it if ``block``."""
+        import select
+
+        while self.backlog:
+            try:
+                done = os.write(self.fd, self.backlog)
+            except BlockingIOError:
+                if not block:
+                    return
+                select.select([], [self.fd], [], 1.0)
+                self._check()
+                continue
+            except OSError:                 # the child is gone
+                self._check(wait=True)
+                raise
+            del self.backlog[:done]
+
+    def _check(self, wait: bool = False) -> None:
+        """Raise the child's error, if it sent one; a RuntimeError if it died."""
+        if wait:
+            self.proc.join()
+        if self.replies.poll():
+            try:
+                kind, value = self.replies.recv()
+            except (EOFError, OSError):
+                kind, value = "died", None
+            if kind == "error":
+                raise value
+            if kind == "done":
+                self.stats = value
+                return
+        if not self.proc.is_alive():
+            raise RuntimeError(f"the process saving the results died (exit code "
+                               f"{self.proc.exitcode}); {self.path} holds the steps saved "
+                               "before")
+
+    def close(self) -> None:
+        """Let the child save every step it was sent and exit; raise its error, if any."""
+        start = time.perf_counter()
+        try:
+            self.backlog += bytes(8)        # length 0: the end
+            self._pump(block=True)
+        finally:
+            os.close(self.fd)
+            self.proc.join()
+            self.seconds += time.perf_counter() - start
+        if self.proc.exitcode != 0 or not self.stats:
+            self._check()
+        if not self.stats:
+            raise RuntimeError(f"the process saving the results ended without a report (exit "
+                               f"code {self.proc.exitcode}); {self.path} holds the steps "
+                               "saved before")
+
+
+def _read_exactly(fd: int, n: int) -> bytes:
+    parts = []
+    while n:
+        part = os.read(fd, min(n, 1 << 20))
+        if not part:
+            raise EOFError
+        parts.append(part)
+        n -= len(part)
+    return b"".join(parts)
+
+
+def _write_in_child(writer: _StepWriter, sim, reader: int, replies, parent_ends) -> None:
+    """The child of :class:`_BackgroundWriter`: save what the run sends until it sends the end
+    or its end of the pipe closes (the run ended or was killed), then report."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    os.close(parent_ends[0])                # else the end of the pipe never comes
+    parent_ends[1].close()
+    busy = 0.0
+    sim.records, sim.maps = [], []          # the first step sent brings the run's history
+    try:
+        while True:
+            try:
+                size = int.from_bytes(_read_exactly(reader, 8), "little")
+                if not size:
+                    break
+                item = pickle.loads(_read_exactly(reader, size))
+            except EOFError:                # the run was killed: what came in is saved
+                break
+            start = time.perf_counter()
+            records, maps, blob, sim.status = item
+            sim.records.extend(records)
+            sim.maps.extend(maps)
+            writer.save(sim, blob)
+            busy += time.perf_counter() - start
+        reply = ("done", {"whole": writer.whole, "appended": writer.appended,
+                          "regrids": writer.regrids, "seconds": dict(writer.seconds),
+                          "busy": busy})
+    except BaseException as exc:            # reported to the run, which raises it
+        reply = ("error", exc)
+    try:
+        replies.send(reply)
+    except OSError:                          # the run is gone: nobody to tell
+        pass
+    except Exception:                        # an exception that does not pickle
+        replies.send(("error", RuntimeError(f"saving the results failed: {reply[1]!r}")))
+
+
+#: the pipe to the writing child holds this many bytes (Linux's default limit for a user)
+_PIPE_BYTES = 1 << 20
+#: the run waits for the child when more than this many bytes of steps wait to be sent
+_BACKLOG_BYTES = 64 << 20
+
+
+def _widen(fd: int) -> None:
+    """Enlarge the kernel buffer of the pipe ``fd`` (Linux; elsewhere a no-op). What it holds
+    survives the run: the child reads it all even if the run is killed."""
+    import fcntl
+
+    try:
+        fcntl.fcntl(fd, getattr(fcntl, "F_SETPIPE_SZ", 1031), _PIPE_BYTES)
+    except OSError:
+        pass
+
+
+def _can_fork() -> bool:
+    """Whether this process can fork a :class:`_BackgroundWriter` (POSIX, not a daemonic
+    process such as a dask worker)."""
+    import multiprocessing
+
+    return ("fork" in multiprocessing.get_all_start_methods()
+            and not multiprocessing.current_process().daemon)
 
 
 #: rows per HDF5 chunk along a growing dimension (one per map step for the maps): one chunk
@@ -286,9 +483,15 @@ def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = N
 
 
 def run_to_file(sim, path: str | Path, *, resume: bool = False,
-                progress: Callable | None = None, attrs: dict | None = None):
+                progress: Callable | None = None, attrs: dict | None = None,
+                background: bool = False):
     """Run ``sim``, saving ``path`` after every step; with ``resume`` continue the run saved
-    there. ``attrs`` are added to the file's global attributes. Returns the final dataset."""
+    there. ``attrs`` are added to the file's global attributes. Returns the final dataset.
+
+    With ``background``, each step is written by a child process while the next one is
+    computed (see :class:`_BackgroundWriter`; what ``thirdbody run`` does): saving then costs
+    the run about 1 ms a step instead of 5-10 ms, on a machine with a core to spare. Where a
+    process cannot fork (Windows, a dask worker), the steps are saved in this process."""
     path = Path(path)
     blob, history, n_maps = None, [], 0
     if resume:
@@ -304,6 +507,19 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
 
     extra = dict(attrs or {})
     writer = _StepWriter(path, extra, history, n_maps)
-    ds = sim.run(progress=progress, checkpoint=writer, resume_from=blob).assign_attrs(extra)
+    if not (background and _can_fork()):
+        ds = sim.run(progress=progress, checkpoint=writer, resume_from=blob)
+    else:
+        child = _BackgroundWriter(writer, sim)
+        try:
+            ds = sim.run(progress=progress, checkpoint=child, resume_from=blob)
+        except BaseException:
+            try:
+                child.close()   # what was computed is saved
+            except Exception:   # the run's own exception says more
+                pass
+            raise
+        child.close()
+    ds = ds.assign_attrs(extra)
     write_results(ds, path)     # whole: a compact file, in the layout xarray writes
     return ds
