@@ -161,9 +161,9 @@ def test_random_sigkills_leave_exactly_the_completed_steps_and_resume_identicall
     """Killed with SIGKILL at 4 random moments (seeded): after every kill the file opens, its
     steps are 0..n-1 with n at least the count seen before the kill, and they equal the first n
     steps of an uninterrupted run; resuming after the last kill gives the uninterrupted file.
-    The kills alternate between the run alone (its child process that writes the steps then
-    saves what it was sent, holding the directory's lock meanwhile, and the resumed run waits
-    for it) and the run's whole process group (the child dies too, at any point of a write)."""
+    The kills alternate between the run alone and its whole process group (the child that
+    writes the steps runs in its own session: it saves what it was sent either way, holding the
+    directory's lock meanwhile, and a resumed run waits for it)."""
     config = tmp_path / "run.toml"
     config.write_text(CONFIG)
     cmd = [sys.executable, "-m", "thirdbody", "run", str(config), "--no-plots"]

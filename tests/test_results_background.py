@@ -2,9 +2,10 @@
 background=True)``, what ``thirdbody run`` does; issue 15): the file is the same as when saving
 in the run's own process, an interrupted run leaves every step it had computed, a run killed
 outright leaves the steps it had sent to the child, and a failing or dying child stops the run
-with its error instead of losing steps in silence."""
+with its error instead of losing steps in silence. The child is a fresh interpreter: faulty
+writers reach it by name from tests/_slow_writers.py (``tests`` on its PYTHONPATH)."""
 
-import multiprocessing
+import fcntl
 import os
 import signal
 import subprocess
@@ -18,6 +19,7 @@ import xarray as xr
 
 import thirdbody.io.results as results
 from test_results_append import layer_sim, potato_sim, steps_on_disk, stop_after
+from thirdbody.cli import LOCK_NAME
 from thirdbody.io import open_results, run_to_file
 
 
@@ -25,31 +27,48 @@ def _timers(ds):
     return [v for v in ds.data_vars if v.startswith("time_")]
 
 
-def _writer_children():
-    return [p for p in multiprocessing.active_children() if p.name == "thirdbody-writer"]
+TESTS = os.path.dirname(os.path.abspath(__file__))
+
+
+@pytest.fixture
+def children(monkeypatch):
+    """The background writers started in this test (their ``proc`` is the child)."""
+    made = []
+    original = results._BackgroundWriter.__init__
+
+    def init(self, *args, **kwargs):
+        original(self, *args, **kwargs)
+        made.append(self)
+
+    monkeypatch.setattr(results._BackgroundWriter, "__init__", init)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join(
+        [TESTS, *filter(None, [os.environ.get("PYTHONPATH")])]))
+    return made
 
 
 @pytest.mark.parametrize("make", [potato_sim, layer_sim], ids=["particle", "layer"])
-def test_saving_in_a_child_gives_the_file_of_saving_in_the_run(make, tmp_path):
+def test_saving_in_a_child_gives_the_file_of_saving_in_the_run(make, tmp_path, children):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         here = run_to_file(make(), tmp_path / "here.nc")
         child = run_to_file(make(), tmp_path / "child.nc", background=True)
-    assert not _writer_children()                       # the child has exited
+    (child_writer,) = children
+    assert child_writer.proc.returncode == 0            # the child has exited
+    assert child_writer.stats["appended"] == here.sizes["step"] - 1
     on_disk = open_results(tmp_path / "child.nc")
     xr.testing.assert_identical(on_disk, child)
     xr.testing.assert_identical(on_disk.drop_vars(_timers(here)),
                                 open_results(tmp_path / "here.nc").drop_vars(_timers(here)))
 
 
-def test_an_interrupted_run_leaves_every_computed_step_and_resumes(tmp_path):
+def test_an_interrupted_run_leaves_every_computed_step_and_resumes(tmp_path, children):
     """Ctrl-C (a KeyboardInterrupt in the run) during step 4: steps 0-2 were sent to the child,
     which saves them all before the run re-raises; the resumed run ends as an uninterrupted
     one."""
     path = tmp_path / "r.nc"
     with pytest.raises(KeyboardInterrupt):
         run_to_file(potato_sim(steps=8), path, progress=stop_after(4), background=True)
-    assert not _writer_children()
+    assert children[0].proc.returncode == 0
     partial = open_results(path)
     assert partial.step.values.tolist() == [0, 1, 2]
     assert partial.attrs["status"] == "running"
@@ -65,46 +84,63 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
     whole process group as Ctrl-C sends it: the child saves the steps it was sent (0-3), then
     exits (at the end of the pipe; it ignores SIGINT). The child is slowed down, so that those
     steps are still in the pipe when the signal comes. The run then resumes to the
-    uninterrupted result."""
-    path = tmp_path / "r.nc"
+    uninterrupted result. The run holds the output directory's lock as the CLI does: the
+    child holds it until it is done."""
+    out = tmp_path / "out"
+    out.mkdir()
+    path = out / "results.nc"
     script = textwrap.dedent(f"""
-        import multiprocessing, os, signal, sys
-        sys.path.insert(0, {os.path.dirname(__file__)!r})
-        import time
+        import os, signal, sys
+        from pathlib import Path
+        sys.path.insert(0, {TESTS!r})
+        os.environ["PYTHONPATH"] = {TESTS!r}
+        from _slow_writers import SlowWriter
         from test_results_append import potato_sim
+        from thirdbody.cli import _lock
         from thirdbody.io import results, run_to_file
 
-        save = results._StepWriter.save
+        lock = _lock(Path({str(out)!r}))
 
-        def slow_save(self, sim, blob):     # the child lags: steps wait in the pipe
-            time.sleep(0.3)
-            save(self, sim, blob)
+        results._StepWriter = SlowWriter    # the child lags: steps wait in the pipe
+        made = []
+        init = results._BackgroundWriter.__init__
 
-        results._StepWriter.save = slow_save
+        def record(self, *args, **kwargs):
+            init(self, *args, **kwargs)
+            made.append(self)
+
+        results._BackgroundWriter.__init__ = record
 
         def progress(record):
             if record.step == 4:
-                child, = [p for p in multiprocessing.active_children()
-                          if p.name == "thirdbody-writer"]
-                print(child.pid, flush=True)
+                print(made[0].proc.pid, flush=True)
                 if {how!r} == "sigkill-run":
                     os.kill(os.getpid(), signal.SIGKILL)
                 os.killpg(0, signal.SIGINT)
 
         try:
             run_to_file(potato_sim(steps=8), {str(path)!r}, progress=progress,
-                        background=True)
+                        background=True, keep_fds=(lock.fileno(),))
         except KeyboardInterrupt:
             sys.exit(130)
     """)
-    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                          timeout=300, start_new_session=True)
-    assert proc.returncode == (-signal.SIGKILL if how == "sigkill-run" else 130), proc.stderr
-    child = int(proc.stdout.split()[0])
+    log = tmp_path / "log"
+    with log.open("w") as err:          # not a pipe: the child keeps the run's stderr open
+        proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                                stderr=err, text=True, start_new_session=True)
+        child = int(proc.stdout.readline())
+        code = proc.wait(timeout=300)
+    assert code == (-signal.SIGKILL if how == "sigkill-run" else 130), log.read_text()
+    if how == "sigkill-run":            # the run is dead, its child still saves: the lock holds
+        assert _alive(child)
+        with (out / LOCK_NAME).open() as handle, pytest.raises(BlockingIOError):
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     deadline = time.monotonic() + 60
     while _alive(child):                    # it exits by itself, at the end of the pipe
         assert time.monotonic() < deadline, "the writing child did not exit"
         time.sleep(0.05)
+    with (out / LOCK_NAME).open() as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)         # released
     on_disk = open_results(path)
     assert on_disk.step.values.tolist() == [0, 1, 2, 3]
     assert on_disk[results.STEP_HISTORY_VARIABLE].size == 4
@@ -124,34 +160,28 @@ def _alive(pid: int) -> bool:
         return False
 
 
-def test_an_error_in_the_child_stops_the_run_with_that_error(monkeypatch, tmp_path):
-    """A full disk while appending step 2 (the fork inherits the patch): the run raises the
-    child's OSError, the file holds steps 0 and 1."""
-    original = results._StepWriter._append
+def test_an_error_in_the_child_stops_the_run_with_that_error(monkeypatch, tmp_path, children):
+    """A full disk while appending step 2: the run raises the child's OSError, the file holds
+    steps 0 and 1."""
+    from _slow_writers import FullDiskWriter
 
-    def full_disk(self, sim, *args):
-        if len(sim.records) == 3:
-            raise OSError(28, "No space left on device")
-        return original(self, sim, *args)
-
-    monkeypatch.setattr(results._StepWriter, "_append", full_disk)
+    monkeypatch.setattr(results, "_StepWriter", FullDiskWriter)
     path = tmp_path / "r.nc"
     with pytest.raises(OSError, match="No space left"):
         run_to_file(potato_sim(steps=8), path, background=True)
-    assert not _writer_children()
+    assert children[0].proc.returncode == 0
     assert open_results(path).step.values.tolist() == [0, 1]
 
 
-def test_a_child_that_dies_stops_the_run(tmp_path):
+def test_a_child_that_dies_stops_the_run(tmp_path, children):
     """The child killed after step 2: the run stops at a later step with a RuntimeError that
     says so (never finishes as if saved); the file holds whole steps."""
     def kill_the_child(record):
         if record.step == 2:
             while steps_on_disk(path) < 1:      # the child has written the first step
                 time.sleep(0.01)
-            (child,) = _writer_children()
-            os.kill(child.pid, signal.SIGKILL)
-            child.join()
+            os.kill(children[0].proc.pid, signal.SIGKILL)
+            children[0].proc.wait()
 
     path = tmp_path / "r.nc"
     with pytest.raises(RuntimeError, match="saving the results died"):
@@ -159,3 +189,29 @@ def test_a_child_that_dies_stops_the_run(tmp_path):
     on_disk = open_results(path)
     assert on_disk.step.values.tolist() == list(range(on_disk.sizes["step"]))
     assert 1 <= on_disk.sizes["step"] <= 3
+
+
+@pytest.mark.parametrize("backlog", [64 << 20, 0], ids=["waits-in-the-run", "run-waits"])
+def test_steps_the_pipe_cannot_take_wait_and_all_reach_the_file(backlog, monkeypatch, tmp_path,
+                                                                children):
+    """A one-page pipe and a slow child: the steps queue in the run (or, with no backlog
+    allowed, the run waits for the child at every step); all of them reach the file."""
+    from _slow_writers import SlowWriter
+
+    monkeypatch.setattr(results, "_StepWriter", SlowWriter)
+    monkeypatch.setattr(results, "_PIPE_BYTES", 4096)
+    monkeypatch.setattr(results, "_BACKLOG_BYTES", backlog)
+    waiting = []                        # bytes left in the run after each step's hand-over
+    original = results._BackgroundWriter.__call__
+
+    def call(self, sim, state):
+        original(self, sim, state)
+        waiting.append(len(self.backlog))
+
+    monkeypatch.setattr(results._BackgroundWriter, "__call__", call)
+    ds = run_to_file(potato_sim(steps=6), tmp_path / "r.nc", background=True)
+    assert children[0].stats["appended"] == 5
+    assert (max(waiting) > 0) == (backlog > 0)  # queued in the run, or handed over each time
+    straight = potato_sim(steps=6).run()
+    xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
+                                straight.drop_vars(_timers(ds)))

@@ -222,7 +222,7 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         _fail(f"-o {out}: cannot create it: {exc.strerror}")
-    lock = _lock(out)  # noqa: F841 - held until the process exits
+    lock = _lock(out)  # held until the process exits (and by the child saving the results)
     if not resume:
         if results.exists():            # written by a run that held the lock before us
             _fail(f"{results} exists: use --resume to continue it, or another --out")
@@ -243,7 +243,8 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", SimulationStoppedWarning)
                 ds = run_to_file(sim, results, resume=resume, progress=progress,
-                                 attrs={"config": cfg.to_toml()}, background=True)
+                                 attrs={"config": cfg.to_toml()}, background=True,
+                                 keep_fds=(lock.fileno(),))
         except (FileNotFoundError, ValueError) as exc:
             _fail(str(exc))
     elapsed = time.perf_counter() - start

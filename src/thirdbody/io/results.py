@@ -218,47 +218,39 @@ class _StepWriter:
 
 class _BackgroundWriter:
     """The per-step checkpoint of :func:`run_to_file` with ``background``: a :class:`_StepWriter`
-    run in a child process (forked when the run starts), so that the simulation computes the
-    next step while the last one is written. Each step the run pickles what the child needs
-    (the records and maps not sent yet, the resume snapshot: it needs the solver state) and
-    writes it to a pipe without waiting; what the pipe cannot take yet (while the child writes
-    the first step's whole file, say) waits in this process and goes at the next step, or when
-    more than ``_BACKLOG_BYTES`` wait.
+    run in a child process (``python -m thirdbody.io._writer``, a fresh interpreter: nothing of
+    this process's threads or locks), so that the simulation computes the next step while the
+    last one is written. Each step the run pickles what the child needs (the records and maps
+    not sent yet, the resume snapshot: it needs the solver state) and writes it to the child's
+    stdin without waiting; what the pipe cannot take yet (while the child starts, or writes the
+    first step's whole file) waits in this process and goes at the next step, or when more than
+    ``_BACKLOG_BYTES`` wait.
 
-    The child ignores SIGINT (Ctrl-C goes to the whole process group): :meth:`close` lets it
-    save every step it was sent, then it exits. If the run is killed, the child still saves the
-    steps in the pipe and exits at its end; it inherits the run's open files, so the CLI's lock
-    on the output directory is held until it is done. An error in the child (a full disk, say)
-    is raised in the run at its next step, or by :meth:`close`; if the child dies, the run stops
-    with a RuntimeError. Either way the file holds the steps saved before."""
+    The child runs in its own session: Ctrl-C, sent to the terminal's process group, does not
+    reach it, and :meth:`close` lets it save every step it was sent. If the run is killed, the
+    child still saves the steps in the pipe and exits at its end; it holds ``keep_fds`` (the
+    CLI's lock on the output directory) until it is done. An error in the child (a full disk,
+    say) is raised in the run at its next step, or by :meth:`close`; if the child dies, the run
+    stops with a RuntimeError. Either way the file holds the steps saved before."""
 
-    def __init__(self, writer: _StepWriter, sim) -> None:
-        import multiprocessing
-        import signal
-        import warnings
+    def __init__(self, writer: _StepWriter, sim, keep_fds: tuple[int, ...] = ()) -> None:
+        import subprocess
+        import sys
 
-        ctx = multiprocessing.get_context("fork")
         self.path = writer.path
         self.sent: tuple[int, int] | None = None    # records, maps sent (None: nothing yet)
         self.stats: dict = {}                        # the child's counters, after close()
         self.seconds = 0.0                           # wall time of the run spent here
-        self.backlog = bytearray()                   # pickled steps the pipe did not take yet
-        reader, self.fd = os.pipe()
-        self.replies, replies_in = ctx.Pipe(duplex=False)
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        try:
-            with warnings.catch_warnings():     # fork with threads (rich's progress bar): the
-                warnings.simplefilter("ignore", DeprecationWarning)  # child takes no lock of theirs
-                self.proc = ctx.Process(target=_write_in_child, name="thirdbody-writer",
-                                        args=(writer, sim, reader, replies_in,
-                                              (self.fd, self.replies)))
-                self.proc.start()
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
-        os.close(reader)
-        replies_in.close()
+        start = time.perf_counter()
+        self.proc = subprocess.Popen([sys.executable, "-m", "thirdbody.io._writer"],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     start_new_session=True, pass_fds=keep_fds)
+        self.fd, self.replies = self.proc.stdin.fileno(), self.proc.stdout.fileno()
         _widen(self.fd)
         os.set_blocking(self.fd, False)
+        self.backlog = bytearray()                   # pickled frames the pipe did not take yet
+        self._send((writer, _Datasets(sim)))
+        self.seconds += time.perf_counter() - start
 
     def __call__(self, sim, state) -> None:
         from ..checkpoint import snapshot
@@ -266,12 +258,14 @@ class _BackgroundWriter:
         start = time.perf_counter()
         self._check()
         n, m = self.sent or (0, 0)          # the first time: the whole history (a resumed run)
-        item = pickle.dumps((sim.records[n:], sim.maps[m:], snapshot(sim, state, history=False),
-                             sim.status), protocol=pickle.HIGHEST_PROTOCOL)
-        self.backlog += len(item).to_bytes(8, "little") + item
-        self._pump(block=len(self.backlog) > _BACKLOG_BYTES)
+        self._send((sim.records[n:], sim.maps[m:], snapshot(sim, state, history=False),
+                    sim.status))
         self.sent = (len(sim.records), len(sim.maps))
         self.seconds += time.perf_counter() - start
+
+    def _send(self, item) -> None:
+        self.backlog += _frame(pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL))
+        self._pump(block=len(self.backlog) > _BACKLOG_BYTES)
 
     def _pump(self, block: bool) -> None:
         """Write the backlog to the pipe: what it takes now, or all of it if ``block``."""
@@ -293,39 +287,70 @@ class _BackgroundWriter:
 
     def _check(self, wait: bool = False) -> None:
         """Raise the child's error, if it sent one; a RuntimeError if it died."""
+        import select
+
         if wait:
-            self.proc.join()
-        if self.replies.poll():
+            self.proc.wait()
+        if select.select([self.replies], [], [], 0)[0]:
             try:
-                kind, value = self.replies.recv()
-            except (EOFError, OSError):
+                kind, value = pickle.loads(_read_frame(self.replies))
+            except (EOFError, OSError, pickle.UnpicklingError):
                 kind, value = "died", None
             if kind == "error":
                 raise value
             if kind == "done":
                 self.stats = value
                 return
-        if not self.proc.is_alive():
+        if self.proc.poll() is not None:
             raise RuntimeError(f"the process saving the results died (exit code "
-                               f"{self.proc.exitcode}); {self.path} holds the steps saved "
+                               f"{self.proc.returncode}); {self.path} holds the steps saved "
                                "before")
 
     def close(self) -> None:
         """Let the child save every step it was sent and exit; raise its error, if any."""
         start = time.perf_counter()
         try:
-            self.backlog += bytes(8)        # length 0: the end
+            self.backlog += _frame(b"")     # the end
             self._pump(block=True)
         finally:
-            os.close(self.fd)
-            self.proc.join()
+            self.proc.stdin.close()
+            self.proc.wait()
             self.seconds += time.perf_counter() - start
-        if self.proc.exitcode != 0 or not self.stats:
+        try:
             self._check()
+        finally:
+            self.proc.stdout.close()
         if not self.stats:
             raise RuntimeError(f"the process saving the results ended without a report (exit "
-                               f"code {self.proc.exitcode}); {self.path} holds the steps "
+                               f"code {self.proc.returncode}); {self.path} holds the steps "
                                "saved before")
+
+
+class _Datasets:
+    """What a :class:`_StepWriter` in another process needs of a Simulation: the records and
+    maps so far, the status, and :meth:`dataset` (as :meth:`Simulation.dataset`)."""
+
+    def __init__(self, sim) -> None:
+        self.single, self.layer, self.inputs = sim.single, sim.layer, sim.inputs()
+        self.cell_size, self.cell_sizes = sim.cell_size, [m.cell_size for m in sim.members]
+        self.records: list = []
+        self.maps: list = []
+        self.status = "running"
+
+    def dataset(self, records=None, maps=None, frame=None, raw=False):
+        from ..records import layer_dataset, to_dataset
+
+        records = self.records if records is None else records
+        maps = self.maps if maps is None else maps
+        if self.single:
+            return to_dataset(records, maps, self.cell_size, self.inputs, self.status,
+                              frame=frame, raw=raw)
+        return layer_dataset(records, maps, self.layer, self.cell_sizes, self.inputs,
+                             self.status, frame=frame, raw=raw)
+
+
+def _frame(data: bytes) -> bytes:
+    return len(data).to_bytes(8, "little") + data
 
 
 def _read_exactly(fd: int, n: int) -> bytes:
@@ -339,43 +364,48 @@ def _read_exactly(fd: int, n: int) -> bytes:
     return b"".join(parts)
 
 
-def _write_in_child(writer: _StepWriter, sim, reader: int, replies, parent_ends) -> None:
-    """The child of :class:`_BackgroundWriter`: save what the run sends until it sends the end
-    or its end of the pipe closes (the run ended or was killed), then report."""
-    import signal
+def _read_frame(fd: int) -> bytes:
+    return _read_exactly(fd, int.from_bytes(_read_exactly(fd, 8), "little"))
 
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-    os.close(parent_ends[0])                # else the end of the pipe never comes
-    parent_ends[1].close()
+
+def serve(reader: int = 0, replies: int = 1) -> None:
+    """The child of :class:`_BackgroundWriter` (``python -m thirdbody.io._writer``): read the
+    writer, then save each step the run sends until it sends the end or its end of the pipe
+    closes (the run ended or was killed); then report on ``replies``."""
+    import dask
+
     busy = 0.0
-    sim.records, sim.maps = [], []          # the first step sent brings the run's history
     try:
-        while True:
-            try:
-                size = int.from_bytes(_read_exactly(reader, 8), "little")
-                if not size:
+        writer, sim = pickle.loads(_read_frame(reader))
+        # xarray takes its write lock from dask's scheduler: a local one here
+        with dask.config.set(scheduler="synchronous"):
+            while True:
+                try:
+                    data = _read_frame(reader)
+                except EOFError:            # the run was killed: what came in is saved
                     break
-                item = pickle.loads(_read_exactly(reader, size))
-            except EOFError:                # the run was killed: what came in is saved
-                break
-            start = time.perf_counter()
-            records, maps, blob, sim.status = item
-            sim.records.extend(records)
-            sim.maps.extend(maps)
-            writer.save(sim, blob)
-            busy += time.perf_counter() - start
+                if not data:
+                    break
+                start = time.perf_counter()
+                records, maps, blob, sim.status = pickle.loads(data)
+                sim.records.extend(records)
+                sim.maps.extend(maps)
+                writer.save(sim, blob)
+                busy += time.perf_counter() - start
         reply = ("done", {"whole": writer.whole, "appended": writer.appended,
                           "regrids": writer.regrids, "seconds": dict(writer.seconds),
                           "busy": busy})
     except BaseException as exc:            # reported to the run, which raises it
         reply = ("error", exc)
     try:
-        replies.send(reply)
-    except OSError:                          # the run is gone: nobody to tell
+        try:
+            text = pickle.dumps(reply)
+        except Exception:                   # an exception that does not pickle
+            text = pickle.dumps(("error", RuntimeError(f"saving the results failed: "
+                                                       f"{reply[1]!r}")))
+        os.write(replies, _frame(text))
+    except OSError:                         # the run is gone: nobody to tell
         pass
-    except Exception:                        # an exception that does not pickle
-        replies.send(("error", RuntimeError(f"saving the results failed: {reply[1]!r}")))
 
 
 #: the pipe to the writing child holds this many bytes (Linux's default limit for a user)
@@ -387,21 +417,12 @@ _BACKLOG_BYTES = 64 << 20
 def _widen(fd: int) -> None:
     """Enlarge the kernel buffer of the pipe ``fd`` (Linux; elsewhere a no-op). What it holds
     survives the run: the child reads it all even if the run is killed."""
-    import fcntl
-
     try:
+        import fcntl
+
         fcntl.fcntl(fd, getattr(fcntl, "F_SETPIPE_SZ", 1031), _PIPE_BYTES)
-    except OSError:
+    except (ImportError, OSError):
         pass
-
-
-def _can_fork() -> bool:
-    """Whether this process can fork a :class:`_BackgroundWriter` (POSIX, not a daemonic
-    process such as a dask worker)."""
-    import multiprocessing
-
-    return ("fork" in multiprocessing.get_all_start_methods()
-            and not multiprocessing.current_process().daemon)
 
 
 #: rows per HDF5 chunk along a growing dimension (one per map step for the maps): one chunk
@@ -484,14 +505,14 @@ def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = N
 
 def run_to_file(sim, path: str | Path, *, resume: bool = False,
                 progress: Callable | None = None, attrs: dict | None = None,
-                background: bool = False):
+                background: bool = False, keep_fds: tuple[int, ...] = ()):
     """Run ``sim``, saving ``path`` after every step; with ``resume`` continue the run saved
     there. ``attrs`` are added to the file's global attributes. Returns the final dataset.
 
     With ``background``, each step is written by a child process while the next one is
     computed (see :class:`_BackgroundWriter`; what ``thirdbody run`` does): saving then costs
-    the run about 1 ms a step instead of 5-10 ms, on a machine with a core to spare. Where a
-    process cannot fork (Windows, a dask worker), the steps are saved in this process."""
+    the run about 1 ms a step instead of 5-25 ms, on a machine with a core to spare. The child
+    inherits the file descriptors ``keep_fds`` (a lock to hold until it is done)."""
     path = Path(path)
     blob, history, n_maps = None, [], 0
     if resume:
@@ -507,10 +528,10 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
 
     extra = dict(attrs or {})
     writer = _StepWriter(path, extra, history, n_maps)
-    if not (background and _can_fork()):
+    if not background:
         ds = sim.run(progress=progress, checkpoint=writer, resume_from=blob)
     else:
-        child = _BackgroundWriter(writer, sim)
+        child = _BackgroundWriter(writer, sim, keep_fds)
         try:
             ds = sim.run(progress=progress, checkpoint=child, resume_from=blob)
         except BaseException:
