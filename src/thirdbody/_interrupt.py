@@ -2,9 +2,10 @@
 
 ``thirdbody/__init__.py`` calls :func:`guard` first when the process is the ``thirdbody``
 command (or ``python -m thirdbody``), so that an interrupt during the ~0.5 s of imports ends the
-process quietly; :func:`thirdbody.cli.main` calls :func:`restore` once the imports are done, and
-from then on Ctrl-C is a ``KeyboardInterrupt`` that the commands handle (a run keeps its
-completed steps). Importing thirdbody as a library leaves the signal alone.
+process quietly; the ``run`` and ``sweep`` commands call :func:`restore` first thing (after the
+imports and typer's parsing, which would turn a KeyboardInterrupt into a silent exit), and from
+then on Ctrl-C is a ``KeyboardInterrupt`` that they handle (a run keeps its completed steps).
+The other commands end quietly on Ctrl-C. Importing thirdbody as a library leaves the signal alone.
 """
 
 from __future__ import annotations

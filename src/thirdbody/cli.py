@@ -159,13 +159,23 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         plots: Annotated[bool, typer.Option(help="write the figures at the end")] = True,
         ) -> None:
     """Run a simulation: OUT/results.nc (written after every step), OUT/config.toml, figures."""
+    # the imports first, while Ctrl-C still ends the process quietly: a KeyboardInterrupt in
+    # the middle of rich's imports ended it with SIGINT after the handler below had run
+    import rich.progress  # noqa: F401
+
+    from . import io, simulation  # noqa: F401
+
+    _interruptible()
     results = out / "results.nc"
     try:
         _run(config, out, results, resume, print_config, plots)
     except KeyboardInterrupt:
         results.with_name(results.name + ".tmp").unlink(missing_ok=True)
-        done = _steps_on_disk(results)
-        if done:
+        done, finished = _steps_on_disk(results, finished=True)
+        if finished:
+            typer.echo(f"\ninterrupted: {results} holds {done} completed step(s), the whole "
+                       f"run; draw its figures with `thirdbody plot {results}`", err=True)
+        elif done:
             typer.echo(f"\ninterrupted: {results} holds {done} completed step(s); continue "
                        f"with `thirdbody run {config} -o {out} --resume`", err=True)
         else:
@@ -174,16 +184,19 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         raise typer.Exit(130) from None
 
 
-def _steps_on_disk(results: Path) -> int:
-    """Completed steps in a results file (0 if there is none or it cannot be read)."""
-    if not results.is_file():
-        return 0
-    try:
-        from .io import open_results
+def _steps_on_disk(results: Path, finished: bool = False):
+    """Completed steps in a results file (0 if there is none or it cannot be read); with
+    ``finished``, also whether it holds a finished run (no resume state)."""
+    steps, done = 0, False
+    if results.is_file():
+        try:
+            from .io import RESUME_VARIABLE, open_results
 
-        return int(open_results(results).sizes.get("step", 0))
-    except (OSError, ValueError):
-        return 0
+            saved = open_results(results)
+            steps, done = int(saved.sizes.get("step", 0)), RESUME_VARIABLE not in saved
+        except (OSError, ValueError):
+            pass
+    return (steps, done) if finished else steps
 
 
 def _run(config: Path, out: Path, results: Path, resume: bool, print_config: bool,
@@ -248,12 +261,19 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
         except (FileNotFoundError, ValueError) as exc:
             _fail(str(exc))
     elapsed = time.perf_counter() - start
-    if plots and ds.sizes.get("step", 0):
+    steps = ds.sizes.get("step", 0)
+    # results.nc is final: from here on Ctrl-C lets the figures finish (an interrupt in the
+    # middle of matplotlib's or pandas' imports broke them with a traceback), then exits 130
+    interrupted = _defer_interrupts()
+    if plots and steps:
         from .plot import save_all
 
         save_all(ds, out)
-    typer.echo(f"{sim.status}: {ds.sizes.get('step', 0)} of {n} steps in {elapsed:.1f} s -> "
-               f"{results}")
+    typer.echo(f"{sim.status}: {steps} of {n} steps in {elapsed:.1f} s -> {results}")
+    if interrupted:
+        typer.echo(f"\ninterrupted at the end: {results} holds {steps} completed step(s), "
+                   "the whole run", err=True)
+        raise typer.Exit(130)
     if sim.status != "complete":
         raise typer.Exit(1)
 
@@ -278,6 +298,7 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
           ) -> None:
     """Run the Cartesian product of a sweep on dask.distributed: OUT/cases/<hash>.nc per case,
     OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases."""
+    _interruptible()
     import warnings
 
     from .simulation import SimulationStoppedWarning
@@ -483,10 +504,26 @@ def _validation_rows() -> list[tuple[str, float, float, float]]:
     return rows
 
 
-def main() -> None:  # pragma: no cover - console entry point
+def _defer_interrupts() -> list[int]:
+    """From now on Ctrl-C is recorded, not raised (for the rest of the process): returns the
+    list the signal numbers go to."""
+    import signal
+
+    seen: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, frame: seen.append(signum))
+    return seen
+
+
+def _interruptible() -> None:
+    """From here on Ctrl-C is a KeyboardInterrupt, which the command handles (it says what is
+    on disk). Until then (the imports, typer's parsing, which turns a KeyboardInterrupt into a
+    silent exit 130) it ends the process with one line (thirdbody._interrupt)."""
     from ._interrupt import restore
 
-    restore()           # imports are done: Ctrl-C is a KeyboardInterrupt again
+    restore()
+
+
+def main() -> None:  # pragma: no cover - console entry point
     try:
         app(prog_name="thirdbody")
     except KeyboardInterrupt:
