@@ -3,7 +3,7 @@ background=True)``, what ``thirdbody run`` does; issue 15): the file is the same
 in the run's own process, an interrupted run leaves every step it had computed, a run killed
 outright leaves the steps it had sent to the child, and a failing or dying child stops the run
 with its error instead of losing steps in silence. The child is a fresh interpreter: faulty
-writers reach it by name from tests/_slow_writers.py (``tests`` on its PYTHONPATH)."""
+writers reach it by name from tests/_faulty_writers.py (``tests`` on its PYTHONPATH)."""
 
 import fcntl
 import os
@@ -94,7 +94,7 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
         from pathlib import Path
         sys.path.insert(0, {TESTS!r})
         os.environ["PYTHONPATH"] = {TESTS!r}
-        from _slow_writers import SlowWriter
+        from _faulty_writers import SlowWriter
         from test_results_append import potato_sim
         from thirdbody.cli import _lock
         from thirdbody.io import results, run_to_file
@@ -177,7 +177,7 @@ def _alive(pid: int) -> bool:
 def test_an_error_in_the_child_stops_the_run_with_that_error(monkeypatch, tmp_path, children):
     """A full disk while appending step 2: the run raises the child's OSError, the file holds
     steps 0 and 1."""
-    from _slow_writers import FullDiskWriter
+    from _faulty_writers import FullDiskWriter
 
     monkeypatch.setattr(results, "_StepWriter", FullDiskWriter)
     path = tmp_path / "r.nc"
@@ -210,7 +210,7 @@ def test_steps_the_pipe_cannot_take_wait_and_all_reach_the_file(backlog, monkeyp
                                                                 children):
     """A one-page pipe and a slow child: the steps queue in the run (or, with no backlog
     allowed, the run waits for the child at every step); all of them reach the file."""
-    from _slow_writers import SlowWriter
+    from _faulty_writers import SlowWriter
 
     monkeypatch.setattr(results, "_StepWriter", SlowWriter)
     monkeypatch.setattr(results, "_PIPE_BYTES", 4096)

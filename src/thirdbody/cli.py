@@ -171,7 +171,7 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         _run(config, out, results, resume, print_config, plots)
     except KeyboardInterrupt:
         results.with_name(results.name + ".tmp").unlink(missing_ok=True)
-        done, finished = _steps_on_disk(results, finished=True)
+        done, finished = _steps_on_disk(results)
         if finished:
             typer.echo(f"\ninterrupted: {results} holds {done} completed step(s), the whole "
                        f"run; draw its figures with `thirdbody plot {results}`", err=True)
@@ -184,9 +184,9 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         raise typer.Exit(130) from None
 
 
-def _steps_on_disk(results: Path, finished: bool = False):
-    """Completed steps in a results file (0 if there is none or it cannot be read); with
-    ``finished``, also whether it holds a finished run (no resume state)."""
+def _steps_on_disk(results: Path) -> tuple[int, bool]:
+    """Completed steps in a results file (0 if there is none or it cannot be read), and
+    whether it holds a finished run (no resume state)."""
     steps, done = 0, False
     if results.is_file():
         try:
@@ -196,7 +196,7 @@ def _steps_on_disk(results: Path, finished: bool = False):
             steps, done = int(saved.sizes.get("step", 0)), RESUME_VARIABLE not in saved
         except (OSError, ValueError):
             pass
-    return (steps, done) if finished else steps
+    return steps, done
 
 
 def _run(config: Path, out: Path, results: Path, resume: bool, print_config: bool,

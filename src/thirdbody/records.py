@@ -18,10 +18,10 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES", "LayerRecord",
-           "StepMaps", "StepRecord", "Variable", "direction_sign", "has_maps",
-           "layer_dataset", "map_frame", "maps_step", "orientation_label", "to_dataset",
-           "union_frames"]
+__all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES",
+           "DatasetSpec", "LayerRecord", "StepMaps", "StepRecord", "Variable", "direction_sign",
+           "has_maps", "layer_dataset", "map_frame", "maps_step", "orientation_label",
+           "to_dataset", "union_frames"]
 
 #: State codes stored in the results (``state`` variable, with ``flag_values``/``flag_meanings``).
 STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
@@ -216,6 +216,28 @@ def maps_step(entry) -> int:
     if isinstance(entry, list | tuple):
         return next(m for m in entry if m is not None).step
     return entry.step
+
+
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What turns a run's records and maps into its results dataset, besides themselves: a
+    particle's cell size, or a layer and its particles' cell sizes, and the run's inputs
+    (picklable: a process writing the results elsewhere builds the same dataset)."""
+
+    single: bool
+    cell_size: float
+    layer: Any
+    cell_sizes: list[float]
+    inputs: dict
+
+    def build(self, records: list, maps: list, status: str,
+              frame: tuple[int, int, int, int] | None = None, raw: bool = False):
+        """:func:`to_dataset` (a particle) or :func:`layer_dataset` (a layer)."""
+        if self.single:
+            return to_dataset(records, maps, self.cell_size, self.inputs, status, frame=frame,
+                              raw=raw)
+        return layer_dataset(records, maps, self.layer, self.cell_sizes, self.inputs, status,
+                             frame=frame, raw=raw)
 
 
 def map_frame(maps: list) -> tuple[int, int, int, int]:

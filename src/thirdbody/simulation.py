@@ -45,7 +45,7 @@ from .particle.member import Compliance, Member, ParticleState, step_maps
 from .particle.model import Particle, Plates
 from .particle.statics import Evaluation, StaticsError
 from .particle.turning import find_stable_orientation, turn_kinematics
-from .records import STATES, LayerRecord, StepMaps, StepRecord, has_maps, layer_dataset, to_dataset
+from .records import STATES, DatasetSpec, LayerRecord, StepMaps, StepRecord, has_maps
 from .rigid import RigidState, classify
 
 __all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError",
@@ -649,11 +649,12 @@ class Simulation:
         :func:`~thirdbody.records.to_dataset`)."""
         records = self.records if records is None else records
         maps = self.maps if maps is None else maps
-        if self.single:
-            return to_dataset(records, maps, self.cell_size, self.inputs(), self.status,
-                              frame=frame, raw=raw)
-        return layer_dataset(records, maps, self.layer, [m.cell_size for m in self.members],
-                             self.inputs(), self.status, frame=frame, raw=raw)
+        return self.dataset_spec().build(records, maps, self.status, frame=frame, raw=raw)
+
+    def dataset_spec(self) -> DatasetSpec:
+        """What :meth:`dataset` needs besides the records and maps (picklable)."""
+        return DatasetSpec(self.single, self.cell_size, self.layer,
+                           [m.cell_size for m in self.members], self.inputs())
 
 
 @dataclass(frozen=True)

@@ -317,13 +317,9 @@ class _BackgroundWriter:
             self.proc.wait()
             self.seconds += time.perf_counter() - start
         try:
-            self._check()
+            self._check()       # the report, or the error; without either, "died"
         finally:
             self.proc.stdout.close()
-        if not self.stats:
-            raise RuntimeError(f"the process saving the results ended without a report (exit "
-                               f"code {self.proc.returncode}); {self.path} holds the steps "
-                               "saved before")
 
 
 class _Datasets:
@@ -331,22 +327,15 @@ class _Datasets:
     maps so far, the status, and :meth:`dataset` (as :meth:`Simulation.dataset`)."""
 
     def __init__(self, sim) -> None:
-        self.single, self.layer, self.inputs = sim.single, sim.layer, sim.inputs()
-        self.cell_size, self.cell_sizes = sim.cell_size, [m.cell_size for m in sim.members]
+        self.spec = sim.dataset_spec()
         self.records: list = []
         self.maps: list = []
         self.status = "running"
 
     def dataset(self, records=None, maps=None, frame=None, raw=False):
-        from ..records import layer_dataset, to_dataset
-
-        records = self.records if records is None else records
-        maps = self.maps if maps is None else maps
-        if self.single:
-            return to_dataset(records, maps, self.cell_size, self.inputs, self.status,
-                              frame=frame, raw=raw)
-        return layer_dataset(records, maps, self.layer, self.cell_sizes, self.inputs,
-                             self.status, frame=frame, raw=raw)
+        return self.spec.build(self.records if records is None else records,
+                               self.maps if maps is None else maps, self.status,
+                               frame=frame, raw=raw)
 
 
 def _frame(data: bytes) -> bytes:
