@@ -5,6 +5,7 @@ exactly."""
 import numpy as np
 import pytest
 
+from _summation import summed
 from thirdbody.bem import (
     ElasticPair,
     Grid,
@@ -345,3 +346,169 @@ def test_coupled_step_meets_the_coupled_equations_by_direct_summation():
     s_plain = s - (u - convolve(fields[0], kernels[0], mode="full", method="direct")[
         n - 1:2 * n - 1, n - 1:2 * n - 1])
     assert np.abs(s_plain[contact]).max() > 1e-3 * scale
+
+
+# --- the coupled passes on a box around a small contact -------------------------------------------
+def _check_coupled_step(step, previous, gap, grid, mat, mu):
+    """The step against the coupled equations on the whole window, from the summed displacements:
+    the separation vanishes in the contact (to coupling_tol = 1e-6) and is not negative outside;
+    the stick cells moved with the plate (Δu = Δs); the slip cells are on the friction limit."""
+    u_z, u_t = summed(grid, mat, step.normal.pressure, step.traction)
+    s = gap + u_z - step.normal.approach
+    scale = np.abs(u_z).max()
+    contact = step.normal.contact
+    assert np.abs(s[contact]).max() < 2e-6 * scale
+    assert s[~contact].min() > -2e-6 * scale
+    _, u_before = summed(grid, mat, previous.normal.pressure, previous.traction)
+    moved = u_t - u_before
+    X, Y = grid.mesh()
+    xc, yc = step.twist_centre
+    turn = step.twist - previous.twist
+    plate = (np.asarray(step.shift) - np.asarray(previous.shift))[:, None, None] \
+        + turn * np.stack([-(Y - yc), X - xc])
+    size = np.abs(moved[:, contact]).max()
+    assert np.abs(moved - plate)[:, step.stick].max() < 1e-6 * size
+    # the normal displacement reported is that of the pressure and the shear it was solved with
+    u_seen, _ = summed(grid, mat, step.normal.pressure, step.normal.traction)
+    assert np.abs(step.normal.displacement - u_seen).max() < 1e-9 * scale
+    limit = mu * step.normal.pressure[step.slip]
+    assert step.residual < 1e-8
+    assert np.hypot(*step.traction[:, step.slip]) == pytest.approx(limit, rel=1e-9)
+    assert step.stick.sum() > 20 and step.slip.sum() > 20
+
+
+def _boxes(monkeypatch):
+    """Record the shapes of the boxes the coupled passes were tried on."""
+    from thirdbody.bem import coupled
+
+    boxes = []
+    around = coupled._box_around
+
+    def spy(*args):
+        box = around(*args)
+        boxes.append(tuple(s.stop - s.start for s in box))
+        return box
+
+    monkeypatch.setattr(coupled, "_box_around", spy)
+    return boxes
+
+
+def _loads(mu: float, force: float, centre: tuple[float, float]):
+    """A normal load, a Cattaneo force 0.5μP along x, then the normal load down to 0.2 P with
+    0.2μ of it along x (the contact shrinks inside the old one) and the plate turned by 2e-4 rad
+    about the contact's centre."""
+    return [dict(force=force, tangential_force=(0.0, 0.0)),
+            dict(force=force, tangential_force=(0.5 * mu * force, 0.0)),
+            dict(force=0.2 * force, tangential_force=(0.04 * mu * force, 0.0), twist=2e-4,
+                 twist_centre=centre)]
+
+
+def test_a_small_contact_is_solved_on_a_box_and_checked_on_the_whole_window(monkeypatch):
+    """A sphere's contact a sixth of a 96² window across, off the window's centre (ν = 0.3,
+    μ = 0.3), under three load steps with history (the last one unloads and turns the plate):
+    the passes run on a box around the contact and its check on the whole window passes; every
+    step meets the coupled equations on every cell of the window and equals the step solved on
+    the whole window to the coupling tolerance."""
+    from thirdbody.bem import coupled
+
+    mu, force = 0.3, 10.0
+    mat, grid, _ = _sphere(96, 0.3, force, width=6.0)
+    X, Y = grid.mesh()
+    centre = (12 * grid.dx, -8 * grid.dy)
+    gap = ((X - centre[0]) ** 2 + (Y - centre[1]) ** 2) / (2 * R)
+    boxes = _boxes(monkeypatch)
+    checks = []
+    check = coupled._on_whole_window
+    monkeypatch.setattr(coupled, "_on_whole_window",
+                        lambda *args: checks.append(check(*args)) or checks[-1])
+    step = whole = None
+    for load in _loads(mu, force, centre):
+        previous, whole_previous = step, whole
+        step = solve_coupled(gap, grid, mat, mu, previous=previous, **load)
+        whole = solve_coupled(gap, grid, mat, mu, previous=whole_previous, _crop=False, **load)
+        if previous is not None:
+            _check_coupled_step(step, previous, gap, grid, mat, mu)
+        # both meet coupling_tol = 1e-6 from different starts: measured differences up to
+        # 2.9e-6 (p), 2.8e-6 (τ), 1.2e-7 (u_z), 6.0e-7 (u_t), relative to their largest values
+        p_max = whole.normal.pressure.max()
+        np.testing.assert_allclose(step.normal.pressure, whole.normal.pressure, rtol=0,
+                                   atol=1e-5 * p_max)
+        np.testing.assert_allclose(step.traction, whole.traction, rtol=0,
+                                   atol=1e-5 * mu * p_max)
+        np.testing.assert_array_equal(step.stick, whole.stick)
+        # the fields outside the box: the displacement of the whole window
+        np.testing.assert_allclose(step.normal.displacement, whole.normal.displacement, rtol=0,
+                                   atol=1e-6 * np.abs(whole.normal.displacement).max())
+        np.testing.assert_allclose(step.displacement, whole.displacement, rtol=0,
+                                   atol=3e-6 * np.abs(whole.displacement).max())
+        assert step.moment == pytest.approx(whole.moment, rel=1e-4, abs=1e-9 * force * grid.dx)
+    assert len(checks) == 3 and all(c is not None for c in checks)
+    assert max(b[0] * b[1] for b in boxes) < 0.3 * 96 * 96
+    assert step.slip.sum() > 20 and abs(step.moment) > 0
+
+
+def _two_spheres(n: int = 96):
+    """Two equal spheres' caps 40 cells apart on an n² window, ν = 0.3: two separate contacts."""
+    mat = Material(E, 0.3)
+    a = hertz.sphere(5.0, R, mat.E_star).contact_radius
+    grid = Grid((n, n), a / 8)
+    X, Y = grid.mesh()
+    centre = 20 * grid.dx
+    gap = np.minimum((X + centre) ** 2 + Y**2, (X - centre) ** 2 + Y**2) / (2 * R)
+    return mat, grid, gap
+
+
+def test_a_contact_outside_the_box_is_found_on_the_whole_window(monkeypatch):
+    """The box misses one of two contacts (its estimate is made to hold the left one only): the
+    step solved on it presses the right sphere into the plate, the check on the whole window
+    sees that, and the passes go on on the whole window to a step that meets the coupled
+    equations on every cell, with both contacts carrying half the load."""
+    from thirdbody.bem import coupled
+
+    mu, force = 0.3, 10.0
+    mat, grid, gap = _two_spheres()
+    X, _ = grid.mesh()
+    estimate = coupled._contact_estimate
+
+    def left_only(*args):
+        mask = estimate(*args)
+        return mask & (X < 0)
+
+    monkeypatch.setattr(coupled, "_contact_estimate", left_only)
+    boxes = _boxes(monkeypatch)
+    checks = []
+    check = coupled._on_whole_window
+    monkeypatch.setattr(coupled, "_on_whole_window",
+                        lambda *args: checks.append(check(*args)) or checks[-1])
+    first = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.0, 0.0))
+    step = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.3 * mu * force, 0),
+                         previous=first)
+    # the first step's box held the left contact only, and its check failed
+    assert boxes[0][1] < 48 and checks[0] is None
+    _check_coupled_step(step, first, gap, grid, mat, mu)
+    for side in (X < 0, X > 0):
+        share = step.normal.pressure[side].sum() * grid.cell_area / force
+        assert share == pytest.approx(0.5, abs=0.02)
+
+
+def test_the_box_is_widened_until_the_contact_fits(monkeypatch):
+    """A box made too small (an estimate of the contact's central cells, no margin) is widened
+    until the contact no longer reaches its edge; the step is the one solved on the whole
+    window."""
+    from thirdbody.bem import coupled
+
+    mu, force = 0.3, 10.0
+    mat, grid, gap = _sphere(96, 0.3, force, width=6.0)
+    X, Y = grid.mesh()
+    monkeypatch.setattr(coupled, "_BOX_MARGIN", 0.0)
+    monkeypatch.setattr(coupled, "_BOX_CELLS", 1)
+    monkeypatch.setattr(coupled, "_contact_estimate",
+                        lambda *args: np.hypot(X, Y) < 3 * grid.dx)
+    boxes = _boxes(monkeypatch)
+    step = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.0, 0.0))
+    assert len(boxes) >= 3 and boxes == sorted(boxes) and boxes[-1][0] < 60
+    whole = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.0, 0.0),
+                          _crop=False)
+    np.testing.assert_allclose(step.normal.pressure, whole.normal.pressure, rtol=0,
+                               atol=1e-5 * whole.normal.pressure.max())
+    np.testing.assert_array_equal(step.normal.contact, whole.normal.contact)

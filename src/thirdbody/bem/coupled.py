@@ -35,12 +35,20 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 from .._citations import cites
 from ..material import Material
 from .grid import Grid
-from .normal import ConvergenceError, _prolong, _restrict, solve_normal
-from .operator import coupling_operator
+from .normal import (
+    ContactAtEdgeError,
+    ConvergenceError,
+    _kkt,
+    _prolong,
+    _restrict,
+    solve_normal,
+)
+from .operator import coupling_operator, surface_displacements
 from .pair import ElasticPair
 from .tangential import TangentialContact, solve_tangential
 
@@ -52,6 +60,12 @@ _LOOSE = 1e-4
 _FORCING = 1e-2
 #: grids with fewer cells than twice this across start on the finest level
 _COARSEST = 32
+#: the passes run on a window around the contact when that holds at most this fraction of cells
+_BOX_FILL = 0.5
+#: the window is the contact's bounding box widened on each side by this fraction of its size
+_BOX_MARGIN = 0.1
+#: or by at least this many cells (both doubled each time the contact reaches the box's edge)
+_BOX_CELLS = 4
 
 _PANAGIOTOPOULOS = ("Panagiotopoulos, P. D. (1975). A nonlinear programming approach to the "
                     "unilateral contact- and friction-boundary value problem in the theory of "
@@ -69,7 +83,8 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
                   twist_centre: tuple[float, float] = (0.0, 0.0),
                   tol: float = 1e-8, coupling_tol: float = 1e-6,
                   max_passes: int = 60,
-                  initial: np.ndarray | None = None) -> TangentialContact:
+                  initial: np.ndarray | None = None,
+                  _crop: bool = True) -> TangentialContact:
     """Solve one load step with normal-tangential coupling.
 
     Parameters
@@ -124,18 +139,36 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
     last = None                 # (traction, slip set) of the last pass
     coupler = coupling_operator(grid.shape, grid.spacing, pair.coupling_modulus) \
         if pair.coupled else None
-    if pair.coupled and initial is None and min(grid.shape) >= 2 * _COARSEST:
+    history: list[float] = []
+    # inexact passes: each half is solved only as accurately as the coupling is converged
+    # (a hundredth of the last change), the last pass at the full tolerance
+    sub_tol = max(tol, _LOOSE) if pair.coupled else tol
+    boxed = None
+    if pair.coupled and _crop and grid.nx * grid.ny >= (2 * _COARSEST) ** 2:
+        boxed = _solve_in_box(gap, grid, pair, mu, force, approach, tangential_force, shift,
+                              previous, previous_pressure, twist, twist_centre, tol,
+                              coupling_tol, max_passes, initial)
+    if boxed is not None:
+        # the passes converged on a window around the contact: its fields on the whole window,
+        # if the separation outside the box is nowhere negative; else one more pass from them
+        inner, box = boxed
+        whole = _on_whole_window(inner, box, gap, grid, pair, tol)
+        if whole is not None:
+            return whole
+        p_guess = _embed(inner.normal.pressure, box, grid.shape)
+        tau = _embed(inner.traction, box, grid.shape)
+        last = (tau, _embed(inner.slip, box, grid.shape))
+        history = list(inner.coupling_changes)
+        sub_tol = tol
+    elif pair.coupled and initial is None and min(grid.shape) >= _COARSEST \
+            and max(grid.shape) >= 2 * _COARSEST:
         # the first passes, where the fields still move a lot, on a grid twice as coarse
         coarse = _coarse_step(gap, grid, pair, mu, force, approach, tangential_force, shift,
                               previous, previous_pressure, twist, twist_centre, tol,
                               coupling_tol, max_passes)
         p_guess = _prolong(coarse.normal.pressure, grid.shape)
         tau = np.stack([_prolong(t, grid.shape) for t in coarse.traction])
-    history: list[float] = []
-    # inexact passes: each half is solved only as accurately as the coupling is converged
-    # (a hundredth of the last change), the last pass at the full tolerance
-    sub_tol = max(tol, _LOOSE) if pair.coupled else tol
-    for passes in range(1, int(max_passes) + 1):
+    for passes in range(len(history) + 1, int(max_passes) + 1):
         normal = solve_normal(gap, grid, pair, force=force, approach=approach, tol=sub_tol,
                               initial=p_guess, traction=tau)
         if last is not None:
@@ -174,16 +207,135 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
         f"{rates}; coupling_tol {coupling_tol:.1e}): try smaller load steps")
 
 
-def _coarse_step(gap, grid, pair, mu, force, approach, tangential_force, shift, previous,
-                 previous_pressure, twist, twist_centre, tol, coupling_tol, max_passes):
-    """The step on a grid of cells twice as large (2x2 averages of the gap, the history's
-    traction and pressure), converged loosely: its fields start the fine passes."""
+def _solve_in_box(gap, grid, pair, mu, force, approach, tangential_force, shift, previous,
+                  previous_pressure, twist, twist_centre, tol, coupling_tol, max_passes,
+                  initial):
+    """The coupled passes on a window around the contact, or None when that window would hold
+    more than ``_BOX_FILL`` of the cells. Every operator of a pass then works on that window
+    (its FFTs are those of the window's size) instead of the whole one; the tractions vanish
+    outside the contact, so the influence between the cells inside is the same. The window is
+    the bounding box of an uncoupled contact estimate (solved loosely on a grid twice as
+    coarse) and of the history's pressure and traction, widened by ``_BOX_MARGIN`` of its size
+    (at least ``_BOX_CELLS``); it is widened further when the contact reaches its edge. What
+    the window cannot see, a contact outside it, the caller checks on the whole window
+    (:func:`_on_whole_window`). Returns (step on the window, box)."""
+    mask = _contact_estimate(gap, grid, pair, force, approach)
+    if mask is None:
+        return None
+    if previous is not None:
+        mask |= (previous.normal.pressure > 0) | (previous.traction != 0).any(axis=0)
+    for field in (previous_pressure, initial):
+        if field is not None:
+            mask |= np.asarray(field) != 0
+    widen = 1
+    while True:
+        box = _box_around(mask, _BOX_CELLS * widen, _BOX_MARGIN * widen)
+        ny, nx = grid.shape
+        if (box[0].stop - box[0].start) * (box[1].stop - box[1].start) > _BOX_FILL * nx * ny:
+            return None
+        sub = Grid((box[1].stop - box[1].start, box[0].stop - box[0].start), grid.spacing,
+                   center=(float(grid.x[box[1]].mean()), float(grid.y[box[0]].mean())))
+        try:
+            inner = solve_coupled(
+                gap[box], sub, pair, mu, force=force, approach=approach,
+                tangential_force=tangential_force, shift=shift,
+                previous=None if previous is None else _crop_step(previous, box, sub),
+                previous_pressure=None if previous_pressure is None
+                else np.asarray(previous_pressure)[box],
+                twist=twist, twist_centre=twist_centre, tol=tol, coupling_tol=coupling_tol,
+                max_passes=max_passes, initial=None if initial is None else initial[box],
+                _crop=False)
+        except ContactAtEdgeError:
+            widen *= 2
+            continue
+        return inner, box
+
+
+def _contact_estimate(gap, grid: Grid, pair: ElasticPair, force, approach) -> np.ndarray | None:
+    """Where the contact will be, roughly: the uncoupled contact solved loosely on a grid twice
+    as coarse, on this grid's cells (None: the coarse solve failed; the whole window decides)."""
+    try:
+        estimate = solve_normal(_restrict(gap), _coarse_grid(grid), pair, force=force,
+                                approach=approach, tol=1e-4)
+    except (ContactAtEdgeError, ConvergenceError, ValueError):
+        return None         # ValueError: an approach that misses the coarse gap
+    return _prolong(estimate.contact.astype(float), grid.shape) > 0
+
+
+def _on_whole_window(inner: TangentialContact, box, gap: np.ndarray, grid: Grid,
+                     pair: ElasticPair, tol: float) -> TangentialContact | None:
+    """The step solved on a box, on the whole window: the displacements of its tractions
+    everywhere, and the normal complementarity checked on every cell (None if it fails: a
+    contact outside the box)."""
+    normal = inner.normal
+    p = _embed(normal.pressure, box, grid.shape)
+    tau = _embed(inner.traction, box, grid.shape)
+    used = np.zeros_like(tau) if normal.traction is None \
+        else _embed(normal.traction, box, grid.shape)
+    u, u_shear, u_t = surface_displacements(grid.shape, grid.spacing, pair, p, tau, used)
+    u_z = u + u_shear
+    g = np.asarray(gap, dtype=float)
+    contact = _embed(normal.contact, box, grid.shape)
+    s = np.where(np.isfinite(g), g + u_z - normal.approach, np.inf)
+    residual = _kkt(s, contact, float(u.max()))
+    if not residual < tol:
+        return None
+    whole = replace(normal, pressure=p, displacement=u_z, contact=contact, gap=gap, grid=grid,
+                    traction=None if normal.traction is None else used, residual=residual)
+    return replace(inner, traction=tau, displacement=u_t,
+                   stick=_embed(inner.stick, box, grid.shape),
+                   slip=_embed(inner.slip, box, grid.shape),
+                   slip_increment=_embed(inner.slip_increment, box, grid.shape), normal=whole)
+
+
+def _box_around(mask: np.ndarray, cells: int, fraction: float) -> tuple[slice, slice]:
+    """The bounding box of ``mask`` widened on each side by ``fraction`` of its size or at least
+    ``cells`` cells, then to a fast FFT length."""
+    box = []
+    for axis, n in enumerate(mask.shape):
+        hits = np.flatnonzero(mask.any(axis=1 - axis))
+        margin = max(cells, int(np.ceil(fraction * (hits[-1] + 1 - hits[0]))))
+        lo, hi = max(int(hits[0]) - margin, 0), min(int(hits[-1]) + 1 + margin, n)
+        size = min(next_fast_len(hi - lo, real=True), n)
+        lo = max(0, min(lo - (size - (hi - lo)) // 2, n - size))
+        box.append(slice(lo, lo + size))
+    return box[0], box[1]
+
+
+def _embed(a: np.ndarray, box: tuple[slice, slice], shape: tuple[int, int]) -> np.ndarray:
+    out = np.zeros((*a.shape[:-2], *shape), dtype=a.dtype)
+    out[(..., *box)] = a
+    return out
+
+
+def _crop_step(step: TangentialContact, box, grid: Grid) -> TangentialContact:
+    """A converged step restricted to a window (its fields on the box's cells)."""
+    cells = (..., *box)
+    normal = step.normal
+    c_normal = replace(normal, pressure=normal.pressure[cells],
+                       displacement=normal.displacement[cells], contact=normal.contact[cells],
+                       gap=np.asarray(normal.gap)[cells], grid=grid,
+                       traction=None if normal.traction is None else normal.traction[cells])
+    return replace(step, traction=step.traction[cells], displacement=step.displacement[cells],
+                   stick=step.stick[cells], slip=step.slip[cells],
+                   slip_increment=step.slip_increment[cells], normal=c_normal)
+
+
+def _coarse_grid(grid: Grid) -> Grid:
+    """The window with cells twice as large (2x2 blocks; an odd last row/column is padded)."""
     nx, ny = grid.n
     dx, dy = grid.spacing
     cx, cy = grid.center
     c_nx, c_ny = (nx + 1) // 2, (ny + 1) // 2
-    coarse = Grid((c_nx, c_ny), (2 * dx, 2 * dy),
-                  center=(cx + (c_nx - nx / 2) * dx, cy + (c_ny - ny / 2) * dy))
+    return Grid((c_nx, c_ny), (2 * dx, 2 * dy),
+                center=(cx + (c_nx - nx / 2) * dx, cy + (c_ny - ny / 2) * dy))
+
+
+def _coarse_step(gap, grid, pair, mu, force, approach, tangential_force, shift, previous,
+                 previous_pressure, twist, twist_centre, tol, coupling_tol, max_passes):
+    """The step on a grid of cells twice as large (2x2 averages of the gap, the history's
+    traction and pressure), converged loosely: its fields start the fine passes."""
+    coarse = _coarse_grid(grid)
     c_previous = c_pressure = None
     if previous_pressure is not None:
         c_pressure = _restrict(previous_pressure)
@@ -198,4 +350,4 @@ def _coarse_step(gap, grid, pair, mu, force, approach, tangential_force, shift, 
                          tangential_force=tangential_force, shift=shift, previous=c_previous,
                          previous_pressure=c_pressure, twist=twist, twist_centre=twist_centre,
                          tol=max(tol, 1e-6), coupling_tol=max(coupling_tol, 1e-4),
-                         max_passes=max_passes)
+                         max_passes=max_passes, _crop=False)
