@@ -5,7 +5,13 @@ Cases of ``normal_contact.py`` (circle, long ellipse, two spots, rough sphere), 
 (both with Q = 0), then the measured steps from that state:
 
 * ``normal``: W from 0.9 N to 1 N with Q = 0 (Spence's inward slip under a growing load);
-* ``shear``: Q = 0.5 μW along x at W = 1 N (a Cattaneo step).
+* ``shear``: Q = 0.5 μW along x at W = 1 N (a Cattaneo step);
+* ``both``: from W = 0.9 N with Q = 0.45 μ N to W = 1 N with Q = 0.5 μ N (both grow, as the
+  particle's demand grows with its load).
+
+In the ``normal`` step the uncoupled tangential solve is trivial (no shear, no history), while the
+coupled one solves Spence's partial slip: that ratio holds a problem the uncoupled step does not
+have.
 
 Uncoupled means :func:`solve_normal` then :func:`solve_tangential` with the previous step's
 history, as the particle runs them; coupled means :func:`solve_coupled` (Panagiotopoulos passes).
@@ -101,9 +107,12 @@ def main(argv=None) -> int:
                     u_first, u_base = first, base
                 else:
                     c_first, c_base = first, base
+            u_mixed = _uncoupled(gap, grid, mat, 0.9, 0.45 * MU, u_first)
+            c_mixed = _coupled(gap, grid, mat, 0.9, 0.45 * MU, c_first)
             for label, force, q, (u_prev, c_prev) in (
                     ("normal", 1.0, 0.0, (u_first, c_first)),
-                    ("shear", 1.0, 0.5 * MU, (u_base, c_base))):
+                    ("shear", 1.0, 0.5 * MU, (u_base, c_base)),
+                    ("both", 1.0, 0.5 * MU, (u_mixed, c_mixed))):
                 t_u, u = _best(_uncoupled, gap, grid, mat, force, q, u_prev)
                 t_c, c = _best(_coupled, gap, grid, mat, force, q, c_prev)
                 X, _ = grid.mesh()

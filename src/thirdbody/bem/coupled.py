@@ -168,6 +168,9 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
                               coupling_tol, max_passes)
         p_guess = _prolong(coarse.normal.pressure, grid.shape)
         tau = np.stack([_prolong(t, grid.shape) for t in coarse.traction])
+        # its stick/slip sets and slip directions start the first tangential solve too (instead
+        # of that solver's own uncoupled coarse-to-fine start)
+        last = (tau, _prolong(coarse.slip.astype(float), grid.shape) > 0.5)
     for passes in range(len(history) + 1, int(max_passes) + 1):
         normal = solve_normal(gap, grid, pair, force=force, approach=approach, tol=sub_tol,
                               initial=p_guess, traction=tau)
