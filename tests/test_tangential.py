@@ -78,6 +78,28 @@ def test_converges_at_the_verge_of_sliding(nu):
     assert t.residual <= 1e-7
 
 
+def test_the_shift_search_near_full_sliding_takes_few_solves(monkeypatch):
+    """Q = 0.9999 μP at ν = 0.3 on 64²: no cell sticks, so force control falls back on a search
+    of the shift. The force F(s) bends over towards μP there; searched on log s against
+    log(μP − F) it takes 5 shift-controlled solves (the Illinois method on (s, F) took 8), and
+    the force is met to 1e-8."""
+    import thirdbody.bem.tangential as tangential
+
+    _, _, normal = setup(64, 0.3)
+    solves = []
+    solve = tangential.solve_tangential
+
+    def count(*args, **kwargs):
+        if kwargs.get("shift") is not None:
+            solves.append(kwargs["shift"])
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(tangential, "solve_tangential", count)
+    t = solve(normal, MU, force=0.9999 * MU * W)
+    assert t.stick.sum() == 0 and t.force[0] == pytest.approx(0.9999 * MU * W, rel=1e-8)
+    assert 0 < len(solves) <= 6
+
+
 def test_stick_radius_error_falls_with_refinement():
     """The stick radius (from the stick area) is within a third of a cell of Cattaneo-Mindlin's
     at every resolution, so its error bound halves with each refinement (measured: 0.02, 0.07,

@@ -50,7 +50,7 @@ from .normal import (
 )
 from .operator import coupling_operator, surface_displacements
 from .pair import ElasticPair
-from .tangential import TangentialContact, solve_tangential
+from .tangential import TangentialContact, restart_traction, solve_tangential
 
 __all__ = ["solve_coupled"]
 
@@ -175,14 +175,7 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
         normal = solve_normal(gap, grid, pair, force=force, approach=approach, tol=sub_tol,
                               initial=p_guess, traction=tau)
         if last is not None:
-            # the last pass's slip cells start on their new friction limit, in their direction
-            # (on the old limit most would count as sticking and the active set would start over)
-            traction, slipping = last
-            norm = np.hypot(*traction)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                unit = traction / np.where(norm > 0, norm, 1.0)
-            tau_guess = np.where(slipping & normal.contact, mu * normal.pressure * unit,
-                                 np.where(normal.contact, traction, 0.0))
+            tau_guess = restart_traction(*last, normal, mu)
         step = solve_tangential(normal, mu, coupling=True, previous_pressure=previous_pressure,
                                 tol=sub_tol, _initial=tau_guess, **tangential)
         if not pair.coupled:

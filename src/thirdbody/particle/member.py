@@ -14,11 +14,12 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..bem import ContactAtEdgeError, ConvergenceError, TangentialContact
+from ..bem.tangential import restart_traction
 from ..loading import LoadStep
 from ..orientation import Rotation, decompose, key
 from ..records import StepMaps, StepRecord
 from ..rigid import RigidState
-from .interface import InterfaceNormal, Window
+from .interface import InterfaceNormal, Window, remap
 from .model import Particle, Plates
 from .statics import Evaluation, PairStatics
 from .surface import LOWER, UPPER
@@ -173,20 +174,31 @@ class Member:
         sides = (("low", ev.low, 1.0, self.plates.mu_low), ("up", ev.up, -1.0, self.plates.mu_up))
         return sides, demand
 
-    def _solve_sides(self, ev: Evaluation, history: dict,
-                     twist: float | None) -> dict[str, TangentialContact]:
+    def _solve_sides(self, ev: Evaluation, history: dict, twist: float | None,
+                     warm: dict | None = None) -> dict[str, TangentialContact]:
         sides, demand = self._sides(ev)
         out = {}
         for side, sol, sign, mu in sides:
             force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
+            initial = None
+            if warm and side in warm:
+                # the last coupled pass's step starts this one (see restart_traction)
+                window, last = warm[side]
+                initial = restart_traction(remap(last.traction, window, sol.window),
+                                           remap(last.slip, window, sol.window) > 0.5,
+                                           sol.contact, mu)
             out[side] = self.interfaces[side].solve_tangential(
-                sol, mu, force, history.get(side), twist=twist, coupling=self.coupling)
+                sol, mu, force, history.get(side), twist=twist, coupling=self.coupling,
+                _initial=initial)
         return out
 
-    def _shear(self, ev: Evaluation) -> dict[str, TangentialContact]:
-        """The tangential steps a coupled evaluation is solved with (no history written)."""
+    def _shear(self, ev: Evaluation,
+               warm: dict | None = None) -> dict[str, TangentialContact]:
+        """The tangential steps a coupled evaluation is solved with (no history written);
+        ``warm``: {side: (window, step)} of the last pass, to start from."""
         orientation, history = self.shear_history
-        return self._solve_sides(ev, history if orientation == key(ev.rotation) else {}, None)
+        return self._solve_sides(ev, history if orientation == key(ev.rotation) else {}, None,
+                                 warm)
 
     def tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
         """Partial slip at both plates with the forces ±F'; if the tractions leave a twisting

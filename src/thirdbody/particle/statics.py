@@ -135,7 +135,7 @@ class PairStatics:
                  coupling: bool = False) -> None:
         self.shape, self.material, self.spacing, self.tol = shape, material, spacing, tol
         self.coupling = bool(coupling) and (1.0 - 2.0 * material.nu) != 0.0
-        self.shear_solver: Callable[[Evaluation], dict] | None = None
+        self.shear_solver: Callable[[Evaluation, dict | None], dict] | None = None
         self.interfaces = {"up": Interface("upper", material, spacing, tol),
                            "low": Interface("lower", material, spacing, tol)}
         self.stride = scan_stride(shape, spacing)
@@ -191,8 +191,10 @@ class PairStatics:
         from ..bem import ConvergenceError
 
         change = math.inf
+        warm = None
         for passes in range(1, self.COUPLING_PASSES + 1):
-            shear = self.shear_solver(ev)
+            shear = self.shear_solver(ev, warm)
+            warm = {side: (getattr(ev, side).window, shear[side]) for side in shear}
             geometry = self.geometry_time
             start = time.perf_counter()
             sols = {side: self.interfaces[side].solve_normal(
@@ -209,7 +211,7 @@ class PairStatics:
                              / float(a.contact.pressure.max()))
             ev = new
             if change <= self.COUPLING_TOL:
-                return replace(ev, shear=self.shear_solver(ev), coupling_passes=passes)
+                return replace(ev, shear=self.shear_solver(ev, warm), coupling_passes=passes)
         raise ConvergenceError(f"normal-tangential coupling of the particle did not converge "
                                f"in {self.COUPLING_PASSES} passes (last change {change:.1e})")
 
