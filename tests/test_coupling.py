@@ -442,9 +442,38 @@ def test_a_small_contact_is_solved_on_a_box_and_checked_on_the_whole_window(monk
         np.testing.assert_allclose(step.displacement, whole.displacement, rtol=0,
                                    atol=3e-6 * np.abs(whole.displacement).max())
         assert step.moment == pytest.approx(whole.moment, rel=1e-4, abs=1e-9 * force * grid.dx)
+        # every field is on the whole window, and the normal residual is the whole window's
+        for field in (step.normal.pressure, step.normal.gap, step.normal.displacement,
+                      step.stick, step.slip, step.slip_increment[0], step.displacement[0]):
+            assert field.shape == grid.shape
+        assert step.normal.residual < 1e-8
     assert len(checks) == 3 and all(c is not None for c in checks)
     assert max(b[0] * b[1] for b in boxes) < 0.3 * 96 * 96
     assert step.slip.sum() > 20 and abs(step.moment) > 0
+
+
+def test_the_box_passes_on_approach_control_history_and_tolerances(monkeypatch):
+    """The arguments reach the passes on the box: a prescribed approach, a pressure history
+    given apart from the previous step (zero: the normal load applied in this step), and a
+    tighter coupling tolerance give the step solved on the whole window."""
+    mu, force = 0.3, 10.0
+    mat, grid, gap = _sphere(96, 0.3, force, width=6.0)
+    boxes = _boxes(monkeypatch)
+    first = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.0, 0.0))
+    load = dict(approach=1.05 * first.normal.approach, shift=np.add(first.shift, (1e-7, 0.0)),
+                previous=first, previous_pressure=np.zeros(grid.shape), coupling_tol=1e-7)
+    step = solve_coupled(gap, grid, mat, mu, **load)
+    whole = solve_coupled(gap, grid, mat, mu, _crop=False, **load)
+    assert len(boxes) == 2
+    assert step.coupling_changes[-1] <= 1e-7 and whole.coupling_changes[-1] <= 1e-7
+    assert step.normal.approach == pytest.approx(1.05 * first.normal.approach, rel=1e-12)
+    p_max = whole.normal.pressure.max()
+    np.testing.assert_allclose(step.normal.pressure, whole.normal.pressure, rtol=0,
+                               atol=1e-6 * p_max)
+    np.testing.assert_allclose(step.traction, whole.traction, rtol=0, atol=1e-6 * mu * p_max)
+    # the zero pressure history matters: with the previous step's the shear differs
+    usual = solve_coupled(gap, grid, mat, mu, **{**load, "previous_pressure": None})
+    assert np.abs(usual.traction - step.traction).max() > 1e-3 * mu * p_max
 
 
 def _two_spheres(n: int = 96):
