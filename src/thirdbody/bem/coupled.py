@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.fft import next_fast_len
 
 from .._citations import cites
 from ..material import Material
@@ -50,7 +49,7 @@ from .normal import (
 )
 from .operator import coupling_operator, surface_displacements
 from .pair import ElasticPair
-from .tangential import TangentialContact, restart_traction, solve_tangential
+from .tangential import TangentialContact, _fast_span, restart_traction, solve_tangential
 
 __all__ = ["solve_coupled"]
 
@@ -291,10 +290,8 @@ def _box_around(mask: np.ndarray, cells: int, fraction: float) -> tuple[slice, s
     for axis, n in enumerate(mask.shape):
         hits = np.flatnonzero(mask.any(axis=1 - axis))
         margin = max(cells, int(np.ceil(fraction * (hits[-1] + 1 - hits[0]))))
-        lo, hi = max(int(hits[0]) - margin, 0), min(int(hits[-1]) + 1 + margin, n)
-        size = min(next_fast_len(hi - lo, real=True), n)
-        lo = max(0, min(lo - (size - (hi - lo)) // 2, n - size))
-        box.append(slice(lo, lo + size))
+        box.append(_fast_span(max(int(hits[0]) - margin, 0),
+                              min(int(hits[-1]) + 1 + margin, n), n))
     return box[0], box[1]
 
 

@@ -647,7 +647,12 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
     else:
         raise ConvergenceError(f"{failure}; no shift transmits the force")
     ftol = max(tol, 1e-12) * q
-    f_lo = -q + float(_force_of(tau0, normal) @ e) if lo == 0.0 else f_lo
+    if lo == 0.0:
+        # at no shift increment: the force of the previous traction on the new discs, an estimate
+        # (the step's reference is that traction as it was); solved when it is not below q
+        f_lo = -q + float(_force_of(tau0, normal) @ e)
+        if f_lo >= 0:
+            f_lo = along(solve(0.0, s_perp))
     for _ in range(10):                     # perpendicular corrections (secant)
         best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, mu * normal.force)
         if best is None:
@@ -699,21 +704,18 @@ def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_
         return None
     logs = lo > 0 and cap > q and f_hi < cap - q       # the deficit μF_N − F·e stays positive
 
-    def to_s(x: float) -> float:
-        return float(np.exp(x)) if logs else x
-
     def value(f: float) -> float:
         # decreasing deficit, so its negative log is increasing like f; zero at the root
         return float(np.log(cap - q) - np.log(max(cap - q - f, 1e-300))) if logs else f
 
-    known = {to_s(np.log(lo)) if logs else lo: f_lo, to_s(np.log(hi)) if logs else hi: f_hi}
+    a, b = (float(np.log(lo)), float(np.log(hi))) if logs else (lo, hi)
+    known = {a: value(f_lo), b: value(f_hi)}            # the bracket's ends, solved already
     best = [t_hi, abs(f_hi)]
 
     def g(x: float) -> float:
-        s = to_s(x)
-        if s in known:
-            return value(known[s])
-        t = solve(s, s_perp)
+        if x in known:
+            return known[x]
+        t = solve(float(np.exp(x)) if logs else x, s_perp)
         f = along(t)
         if abs(f) < best[1]:
             best[:] = [t, abs(f)]
@@ -721,7 +723,6 @@ def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_
             raise _ForceMet
         return value(f)
 
-    a, b = (np.log(lo), np.log(hi)) if logs else (lo, hi)
     try:
         brentq(g, a, b, xtol=1e-300, rtol=1e-13, maxiter=100)
     except _ForceMet:
