@@ -63,6 +63,24 @@ def _coupled(gap, grid, mat, force, q, previous):
                          previous=previous)
 
 
+def _problem(case: str, n: int) -> dict:
+    """``normal_contact``'s cases, and two harder ones for the box the passes run on:
+    ``ellipse10_30deg``, the 10:1 ellipse turned by 30° (its bounding box is far larger than
+    the contact), and ``filling``, a circle whose contact spans 80 % of the window (no box)."""
+    if case == "ellipse10_30deg":
+        prob = make_problem("ellipse10", n)
+        c = (np.arange(n) - (n - 1) / 2) * prob["h"]
+        x, y = c[None, :], c[:, None]
+        u = x * np.cos(np.pi / 6) + y * np.sin(np.pi / 6)
+        v = -x * np.sin(np.pi / 6) + y * np.cos(np.pi / 6)
+        return {**prob, "gap": u**2 / (2 * 0.2) + v**2 / (2 * 0.02)}
+    if case == "filling":
+        prob = make_problem("circle", n)
+        # the same sphere on a window 0.3125 as wide: a = 0.4 of the window, not 1/8
+        return {**prob, "h": prob["h"] * 0.3125, "gap": prob["gap"] * 0.3125**2}
+    return make_problem(case, n)
+
+
 def _normal_half(gap, grid, mat, force, previous, converged):
     return tb.solve_normal(gap, grid, mat, force=force, initial=previous.normal.pressure,
                            traction=converged.traction)
@@ -98,7 +116,8 @@ def _best(fn, *args):
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[128, 256])
-    ap.add_argument("--cases", nargs="+", default=["circle", "ellipse10", "two_spots", "rough"])
+    ap.add_argument("--cases", nargs="+", default=["circle", "ellipse10", "two_spots", "rough",
+                                                   "ellipse10_30deg", "filling"])
     ap.add_argument("--out", type=Path, default=None, help="write coupling.md here")
     args = ap.parse_args(argv)
     mat = tb.Material(E_YOUNG, NU)
@@ -109,7 +128,7 @@ def main(argv=None) -> int:
     print(head)
     for case in args.cases:
         for n in args.sizes:
-            prob = make_problem(case, n)
+            prob = _problem(case, n)
             grid = tb.Grid(n, prob["h"])
             gap = prob["gap"]
             for name, fn in (("u", _uncoupled), ("c", _coupled)):
