@@ -541,3 +541,28 @@ def test_the_box_is_widened_until_the_contact_fits(monkeypatch):
     np.testing.assert_allclose(step.normal.pressure, whole.normal.pressure, rtol=0,
                                atol=1e-5 * whole.normal.pressure.max())
     np.testing.assert_array_equal(step.normal.contact, whole.normal.contact)
+
+
+def test_a_box_that_cannot_grow_hands_the_step_to_the_whole_window(monkeypatch):
+    """A box that stays the same when widened (here: always the contact's central 8 x 8 cells)
+    is given up after one try instead of being retried forever: the passes run on the whole
+    window, and the step is the one solved there."""
+    from thirdbody.bem import coupled
+
+    mu, force = 0.3, 10.0
+    mat, grid, gap = _sphere(96, 0.3, force, width=6.0)
+    tries = []
+
+    def fixed(mask, cells, fraction):
+        tries.append(cells)
+        if len(tries) > 5:
+            raise AssertionError("the same box was tried again and again")
+        return slice(44, 52), slice(44, 52)
+
+    monkeypatch.setattr(coupled, "_box_around", fixed)
+    step = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.0, 0.0))
+    assert len(tries) == 2          # the first box, and its widening, which is the same
+    whole = solve_coupled(gap, grid, mat, mu, force=force, tangential_force=(0.0, 0.0),
+                          _crop=False)
+    np.testing.assert_array_equal(step.normal.pressure, whole.normal.pressure)
+    np.testing.assert_array_equal(step.traction, whole.traction)

@@ -222,12 +222,14 @@ def _solve_in_box(gap, grid, pair, mu, force, approach, tangential_force, shift,
     for field in (previous_pressure, initial):
         if field is not None:
             mask |= np.asarray(field) != 0
-    widen = 1
+    widen, last = 1, None
     while True:
         box = _box_around(mask, _BOX_CELLS * widen, _BOX_MARGIN * widen)
         ny, nx = grid.shape
-        if (box[0].stop - box[0].start) * (box[1].stop - box[1].start) > _BOX_FILL * nx * ny:
-            return None
+        if (box[0].stop - box[0].start) * (box[1].stop - box[1].start) > _BOX_FILL * nx * ny \
+                or box == last:
+            return None         # too large, or it cannot grow: the whole window decides
+        last = box
         sub = Grid((box[1].stop - box[1].start, box[0].stop - box[0].start), grid.spacing,
                    center=(float(grid.x[box[1]].mean()), float(grid.y[box[0]].mean())))
         try:
