@@ -637,11 +637,12 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
     lo = 0.0
     hi, t_hi = s_hi, solve(s_hi, s_perp)
     f_hi = along(t_hi)
-    for _ in range(60):
+    cap = mu * normal.force
+    for jump in range(60):
         if f_hi >= 0:
             break
         lo, f_lo = hi, f_hi
-        hi *= 2.0
+        hi *= _bracket_factor(f_hi, q, cap, jump)
         t_hi = solve(hi, s_perp)
         f_hi = along(t_hi)
     else:
@@ -654,7 +655,7 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         if f_lo >= 0:
             f_lo = along(solve(0.0, s_perp))
     for _ in range(10):                     # perpendicular corrections (secant)
-        best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, mu * normal.force)
+        best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, cap)
         if best is None:
             break
         perp = float(best.force @ e_perp)
@@ -684,6 +685,26 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
     raise ConvergenceError(f"{failure}; the shift search did not converge either")
 
 
+#: the shift search's first step past a shift that transmits too little force: the root
+#: predicted from the deficit's fall as s⁻², times this margin
+_BRACKET_MARGIN = 1.05
+
+
+def _bracket_factor(f: float, q: float, cap: float, jump: int) -> float:
+    """How far to move the shift (a factor on it) after a solve that transmits too little force
+    (f = F·e − q < 0) to bracket the root. Near full sliding the deficit μF_N − F·e falls like
+    1/(s − s₀)² with s₀ >= 0 (see :func:`_root`; measured local exponents 3.5 down to 2.0 on
+    the coupled Fig. 3 run), so s (deficit / (μF_N − q))^½, the root if s₀ were 0, is at or
+    beyond it: a bracket with one solve where doubling took 1-5. Later jumps at least double
+    the shift, so a force that bends over differently is still bracketed."""
+    factor = 2.0
+    if cap > q:
+        factor = _BRACKET_MARGIN * float(np.sqrt((cap - q - f) / (cap - q)))
+        if jump > 0:
+            factor = max(factor, 2.0)
+    return max(factor, 1.0 + 1e-3)
+
+
 class _ForceMet(Exception):
     """Raised inside the root search once the force is met, to stop it there."""
 
@@ -692,30 +713,33 @@ def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_
           ftol: float, q: float, cap: float):
     """The shift along the force that transmits it, in the bracket [lo, hi] (f_lo < 0 < f_hi,
     f = F·e − q): Brent's method (scipy's brentq), stopped as soon as |f| <= ftol. Near full
-    sliding F(s) bends over towards μF_N (``cap``) like a power of s, so the search runs on
-    log s against log(μF_N − F·e), where that is a straight line: the Illinois method on (s, f)
-    took 8-11 solves there (77 % of the Fig. 3 run with coupling). Returns the step, or None
-    if the bracket holds no root to ftol."""
+    sliding every cell slips at an angle ~ b_i / (s − s_i) to e, so the deficit μF_N − F·e
+    (``cap`` − F·e) falls like 1/(s − s₀)²; the search runs on s against
+    (μF_N − q)^½ / (μF_N − F·e)^½ − 1, which is then a straight line through the root: one
+    or two solves inside the bracket (the Illinois method on (s, f) took 8-11 solves, Brent on
+    log s against log(μF_N − F·e) 3). Returns the step, or None if the bracket holds no root
+    to ftol."""
     from scipy.optimize import brentq
 
     if abs(f_hi) <= ftol:
         return t_hi
     if not f_lo < 0 < f_hi:
         return None
-    logs = lo > 0 and cap > q and f_hi < cap - q       # the deficit μF_N − F·e stays positive
+    model = cap > q and f_hi < cap - q       # the deficit μF_N − F·e stays positive
 
     def value(f: float) -> float:
-        # decreasing deficit, so its negative log is increasing like f; zero at the root
-        return float(np.log(cap - q) - np.log(max(cap - q - f, 1e-300))) if logs else f
+        # increasing with f, zero at the root, linear in s where the deficit goes as 1/(s − s₀)²
+        if model:
+            return float(np.sqrt((cap - q) / max(cap - q - f, 1e-300))) - 1.0
+        return f
 
-    a, b = (float(np.log(lo)), float(np.log(hi))) if logs else (lo, hi)
-    known = {a: value(f_lo), b: value(f_hi)}            # the bracket's ends, solved already
+    known = {lo: value(f_lo), hi: value(f_hi)}          # the bracket's ends, solved already
     best = [t_hi, abs(f_hi)]
 
     def g(x: float) -> float:
         if x in known:
             return known[x]
-        t = solve(float(np.exp(x)) if logs else x, s_perp)
+        t = solve(x, s_perp)
         f = along(t)
         if abs(f) < best[1]:
             best[:] = [t, abs(f)]
@@ -724,7 +748,7 @@ def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_
         return value(f)
 
     try:
-        brentq(g, a, b, xtol=1e-300, rtol=1e-13, maxiter=100)
+        brentq(g, lo, hi, xtol=1e-300, rtol=1e-13, maxiter=100)
     except _ForceMet:
         return best[0]
     except RuntimeError:        # brentq's iteration budget
