@@ -103,6 +103,78 @@ def test_the_shift_search_near_full_sliding_takes_few_solves(monkeypatch, fracti
     assert 0 < len(solves) <= 4
 
 
+def _turned_ellipse(n=64, nu=0.3):
+    """An elliptical contact (radii of curvature 4:1) turned by 30° from x, about 16 x 8 cells:
+    with ν > 0 its tangential compliance is anisotropic and not aligned with x, so a shift
+    along a force transmits a force at an angle to it."""
+    mat = tb.Material(210e9, nu)
+    grid = tb.Grid(n, L / n)
+    X, Y = grid.mesh()
+    u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
+    v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
+    return tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, mat, force=W)
+
+
+@pytest.mark.parametrize("angle, fraction, broyden", [
+    (20, 0.9999, True), (20, 0.999999, True), (80, 0.9999, True),
+    (20, 0.9999, False), (20, 0.999999, False)])
+def test_the_shift_search_turns_the_shift_to_meet_an_oblique_force(monkeypatch, angle,
+                                                                   fraction, broyden):
+    """Q at 20° and 80° from x on the turned ellipse, at 0.9999 and 0.999999 μP: force control
+    finds no stick cell and searches the shift. A shift along Q transmits a force at an angle
+    to it, so the search also turns the shift: the force is met in both components to 1e-8 of |Q|
+    (summed from the tractions here), Coulomb's law holds, and the shift is measurably off Q's
+    direction. Broyden's method on the force's magnitude and angle does it in 7-11 solves in
+    all; its fallback (a secant step across Q, then a new root along it) took 12-20 and must
+    still get there."""
+    import thirdbody.bem.tangential as tangential
+
+    if not broyden:
+        monkeypatch.setattr(tangential, "_BROYDEN_STEPS", 0)
+    normal = _turned_ellipse()
+    e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    Q = fraction * MU * W * e
+    solves = []
+    solve = tangential.solve_tangential
+
+    def count(*args, **kwargs):
+        if kwargs.get("shift") is not None:
+            solves.append(kwargs["shift"])
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(tangential, "solve_tangential", count)
+    t = solve(normal, MU, force=Q)
+    assert len(solves) > 0 and t.stick.sum() == 0
+    if broyden:
+        assert len(solves) <= 11
+    check_coulomb(t)
+    force = t.traction.reshape(2, -1).sum(axis=1) * normal.grid.cell_area
+    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
+    along = t.shift / np.hypot(*t.shift)
+    assert abs(e[0] * along[1] - e[1] * along[0]) > 1e-3      # sine of the angle between them
+
+
+def test_the_shift_search_gives_the_force_controlled_step():
+    """The shift search (the fallback of force control) called at Q = 0.5 μP at 20° on the
+    turned ellipse, where force control works: it starts from the previous traction's force
+    (no shift increment), corrects the shift's perpendicular component, and returns the step
+    the force-controlled active set returns, to the solvers' tolerance."""
+    import thirdbody.bem.tangential as tangential
+
+    normal = _turned_ellipse()
+    e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
+    Q = 0.5 * MU * W * e
+    by_force = solve_tangential(normal, MU, force=Q)
+    by_shift = tangential._force_by_shift(
+        normal, MU, Q, None, np.zeros(2), 1e-8, False, 60, 500, "",
+        {"twist": 0.0, "twist_centre": (0.0, 0.0)}, {"coupling": False, "previous_pressure": None})
+    assert by_force.stick.sum() > 0
+    np.testing.assert_allclose(by_shift.force, Q, rtol=0, atol=1e-8 * np.hypot(*Q))
+    np.testing.assert_allclose(by_shift.shift, by_force.shift, rtol=1e-6)
+    np.testing.assert_allclose(by_shift.traction, by_force.traction, rtol=0,
+                               atol=1e-6 * MU * normal.pressure.max())
+
+
 def test_stick_radius_error_falls_with_refinement():
     """The stick radius (from the stick area) is within a third of a cell of Cattaneo-Mindlin's
     at every resolution, so its error bound halves with each refinement (measured: 0.02, 0.07,

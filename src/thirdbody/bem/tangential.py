@@ -593,13 +593,16 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
                     failure, spin, couple):
     """Force control by root finding on the shift increment: along e = Q/|Q| the transmitted
     force F(s e)·e increases monotonically with s (F is the gradient of a convex function of
-    the shift), so it is bracketed and solved by Brent's method (:func:`_root`); the
-    perpendicular component is corrected by a secant step when the contact is not symmetric."""
+    the shift), so it is bracketed and solved by Brent's method (:func:`_root`). When the
+    contact is not symmetric that force is at an angle to Q: the shift's length and angle are
+    then corrected together by Broyden's method (:func:`_broyden`), or, should that fail, one
+    at a time (a secant step across e, then a new root along e)."""
     q = float(np.hypot(*Q))
     e = Q / q
     e_perp = np.array([-e[1], e[0]])
     iterations = 0
     warm: list[np.ndarray | None] = [None]
+    points: list[tuple[float, float, TangentialContact]] = []     # every solve: (s, s_perp, step)
 
     def solve(s: float, s_perp: float) -> TangentialContact:
         nonlocal iterations
@@ -616,10 +619,20 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
                                  **spin, **couple)
         warm[0] = t.traction
         iterations += t.iterations
+        points.append((s, s_perp, t))
         return t
 
     def along(t: TangentialContact) -> float:
         return float(t.force @ e) - q
+
+    def mismatch(t: TangentialContact) -> np.ndarray:
+        # the force's magnitude as (μF_N − q)^½ / (μF_N − |F|)^½ − 1 and its angle to e: both
+        # zero at the root and nearly linear in the shift near full sliding, the first in the
+        # shift's length (see _root), the second in its angle; F·e would mix the two (the
+        # angle lowers it to second order, as much as the last 1e-4 of the length does)
+        f = float(np.hypot(*t.force))
+        h = np.sqrt((cap - q) / max(cap - f, 1e-300)) - 1.0 if cap > q else f - q
+        return np.array([h, float(np.arctan2(t.force @ e_perp, t.force @ e))])
 
     # scale: the shift of full sliding along e (all cells slip once the plate has moved past
     # the furthest surface point)
@@ -654,7 +667,7 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         f_lo = -q + float(_force_of(tau0, normal) @ e)
         if f_lo >= 0:
             f_lo = along(solve(0.0, s_perp))
-    for _ in range(10):                     # perpendicular corrections (secant)
+    for _ in range(10):                     # corrections of the shift's angle
         best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, cap)
         if best is None:
             break
@@ -663,6 +676,12 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
             return replace(best, iterations=iterations)
         s_best = float((best.shift - prev_shift) @ e)
         probe = solve(s_best, s_perp + 1e-3 * s_best)
+        # both components at once: Broyden's method from the Jacobian of the solves at hand
+        met = _broyden(solve, mismatch, np.array([s_best, s_perp]), best, probe,
+                       1e-3 * s_best, points, lambda t: float(np.abs(t.force - Q).max()) <= ftol)
+        if met is not None:
+            return replace(met, iterations=iterations)
+        # else one component at a time: a secant step across e, then the root along e again
         slope = (float(probe.force @ e_perp) - perp) / (1e-3 * s_best)
         if slope == 0:
             break
@@ -683,6 +702,60 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         if f_lo > 0 or f_hi < 0:
             break
     raise ConvergenceError(f"{failure}; the shift search did not converge either")
+
+
+#: Broyden steps of the shift search before it falls back on one component at a time
+_BROYDEN_STEPS = 8
+
+
+def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
+    """The shift s e + s_perp e_perp where the force F meets Q in both components, from a root
+    along e (``t`` at x = (s, s_perp): F·e = |Q|, F·e_perp ≠ 0): Broyden's method (1965) on
+    ``mismatch``, two functions of the force that vanish at Q and are nearly linear in the
+    shift's length s and angle s_perp / s, the unknowns here. Its first Jacobian costs no
+    solve beyond ``probe`` (at x + (0, h)): the secants to it and to the nearest other solve
+    on the same line (the root search's iterates). ``met`` says when the force is met. Returns
+    the step, or None (a step that raised the mismatch tenfold, a shift that would not be
+    positive along e, or ``_BROYDEN_STEPS`` spent: the caller then corrects one component at
+    a time).
+
+    Broyden, C. G. (1965). A class of methods for solving nonlinear simultaneous equations.
+    Math. Comp. 19, 577-593."""
+    def polar(s: float, s_perp: float) -> np.ndarray:
+        return np.array([s, s_perp / s])
+
+    # (not the root itself, which may come back a rounding away from x)
+    line = [(s, step) for s, sp, step in points
+            if sp == x[1] and abs(s - x[0]) > 1e-6 * abs(x[0])]
+    if not line or h == 0 or x[0] <= 0:
+        return None
+    s2, t2 = min(line, key=lambda p: abs(p[0] - x[0]))
+    if s2 <= 0:
+        return None
+    y, r = polar(*x), mismatch(t)
+    start = float(np.abs(r).max())
+    steps = np.column_stack([polar(s2, x[1]) - y, polar(x[0], x[1] + h) - y])
+    changes = np.column_stack([mismatch(t2) - r, mismatch(probe) - r])
+    try:
+        J = changes @ np.linalg.inv(steps)
+    except np.linalg.LinAlgError:
+        return None
+    for _ in range(_BROYDEN_STEPS):
+        try:
+            dy = -np.linalg.solve(J, r)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.isfinite(dy).all() or y[0] + dy[0] <= 0:
+            return None
+        t_new = solve(float(y[0] + dy[0]), float((y[0] + dy[0]) * (y[1] + dy[1])))
+        if met(t_new):
+            return t_new
+        r_new = mismatch(t_new)
+        if np.abs(r_new).max() > 10 * start:
+            return None
+        J = J + np.outer(r_new - r - J @ dy, dy) / float(dy @ dy)
+        y, r = y + dy, r_new
+    return None
 
 
 #: the shift search's first step past a shift that transmits too little force: the root
