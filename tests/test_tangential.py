@@ -214,8 +214,19 @@ def test_force_above_the_friction_limit_is_refused():
 @pytest.mark.parametrize("bad", [{"mu": -0.1}, {"mu": float("nan")}])
 def test_bad_friction_coefficient(bad):
     _, _, normal = setup(32, 0.3)
-    with pytest.raises(ValueError, match="mu"):
+    with pytest.raises(ValueError, match=r"mu \(friction coefficient\) must be .* >= 0"):
         solve_tangential(normal, bad["mu"], force=0.1)
+
+
+@pytest.mark.parametrize("load", [{"force": float("nan")}, {"force": (0.1, 0.0, 0.0)},
+                                  {"shift": (np.inf, 0.0)}, {"force": 0.1, "shift": 0.0}, {}])
+def test_bad_tangential_load(load):
+    """A force or shift that is not a finite scalar or 2-vector, or both or neither, is refused
+    with the field's name."""
+    _, _, normal = setup(32, 0.3)
+    names = "force|shift" if len(load) != 1 else next(iter(load))
+    with pytest.raises(ValueError, match=names):
+        solve_tangential(normal, MU, **load)
 
 
 @pytest.mark.parametrize("nu", [0.0, 0.3, 0.5])
