@@ -103,16 +103,20 @@ def test_the_shift_search_near_full_sliding_takes_few_solves(monkeypatch, fracti
     assert 0 < len(solves) <= 4
 
 
+#: the turned ellipse's normal force, N (not 1: μ F_N and μ / F_N must differ)
+W_ELLIPSE = 3.0
+
+
 def _turned_ellipse(n=64, nu=0.3):
-    """An elliptical contact (radii of curvature 4:1) turned by 30° from x, about 16 x 8 cells:
-    with ν > 0 its tangential compliance is anisotropic and not aligned with x, so a shift
-    along a force transmits a force at an angle to it."""
+    """An elliptical contact (radii of curvature 4:1) turned by 30° from x, 26 x 18 cells across,
+    under W_ELLIPSE: with ν > 0 its tangential compliance is anisotropic and not aligned with
+    x, so a shift along a force transmits a force at an angle to it."""
     mat = tb.Material(210e9, nu)
     grid = tb.Grid(n, L / n)
     X, Y = grid.mesh()
     u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
     v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
-    return tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, mat, force=W)
+    return tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, mat, force=W_ELLIPSE)
 
 
 @pytest.mark.parametrize("angle, fraction, broyden", [
@@ -133,7 +137,7 @@ def test_the_shift_search_turns_the_shift_to_meet_an_oblique_force(monkeypatch, 
         monkeypatch.setattr(tangential, "_BROYDEN_STEPS", 0)
     normal = _turned_ellipse()
     e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
-    Q = fraction * MU * W * e
+    Q = fraction * MU * W_ELLIPSE * e
     solves = []
     solve = tangential.solve_tangential
 
@@ -154,21 +158,33 @@ def test_the_shift_search_turns_the_shift_to_meet_an_oblique_force(monkeypatch, 
     assert abs(e[0] * along[1] - e[1] * along[0]) > 1e-3      # sine of the angle between them
 
 
-def test_the_shift_search_gives_the_force_controlled_step():
+@pytest.mark.parametrize("warm_fails", [False, True])
+def test_the_shift_search_gives_the_force_controlled_step(monkeypatch, warm_fails):
     """The shift search (the fallback of force control) called at Q = 0.5 μP at 20° on the
-    turned ellipse, where force control works: it starts from the previous traction's force
-    (no shift increment), corrects the shift's perpendicular component, and returns the step
-    the force-controlled active set returns, to the solvers' tolerance."""
+    turned ellipse after a step at 0.3 μP along x, where force control works: it starts from
+    the previous traction's force (no shift increment), turns the shift, and returns the step
+    the force-controlled active set returns, to the solvers' tolerance. It does so also when
+    every warm-started solve fails (it then solves them from scratch)."""
     import thirdbody.bem.tangential as tangential
 
     normal = _turned_ellipse()
+    first = solve_tangential(normal, MU, force=0.3 * MU * W_ELLIPSE)
     e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
-    Q = 0.5 * MU * W * e
-    by_force = solve_tangential(normal, MU, force=Q)
+    Q = 0.5 * MU * W_ELLIPSE * e
+    by_force = solve_tangential(normal, MU, force=Q, previous=first)
+    if warm_fails:
+        solve = tangential.solve_tangential
+
+        def cold_only(*args, **kwargs):
+            if kwargs.get("_initial") is not None:
+                raise tangential.ConvergenceError("a warm start that fails")
+            return solve(*args, **kwargs)
+
+        monkeypatch.setattr(tangential, "solve_tangential", cold_only)
     by_shift = tangential._force_by_shift(
-        normal, MU, Q, None, np.zeros(2), 1e-8, False, 60, 500, "",
+        normal, MU, Q, first, np.asarray(first.shift), 1e-8, False, 60, 500, "",
         {"twist": 0.0, "twist_centre": (0.0, 0.0)}, {"coupling": False, "previous_pressure": None})
-    assert by_force.stick.sum() > 0
+    assert by_force.stick.sum() > 0 and np.abs(first.shift).max() > 0
     np.testing.assert_allclose(by_shift.force, Q, rtol=0, atol=1e-8 * np.hypot(*Q))
     np.testing.assert_allclose(by_shift.shift, by_force.shift, rtol=1e-6)
     np.testing.assert_allclose(by_shift.traction, by_force.traction, rtol=0,
