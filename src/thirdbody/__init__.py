@@ -16,9 +16,9 @@ Public API::
     Simulation(layer, plates, load).run()  -> xarray.Dataset along (step, particle)
 """
 
-from ._interrupt import guard as _guard
-
-_guard()  # the thirdbody command only: Ctrl-C during these imports exits 130 quietly
+# first: for the thirdbody command only, Ctrl-C during these imports exits 130 quietly (the
+# guard is installed as the module is imported)
+from . import _interrupt  # noqa: F401, I001
 
 from . import orientation
 from ._citations import citations

@@ -1,8 +1,10 @@
 """Ctrl-C while the command line is still importing: exit 130 with one line, no traceback.
 
-``thirdbody/__init__.py`` calls :func:`guard` first when the process is the ``thirdbody``
-command (or ``python -m thirdbody``), so that an interrupt during the ~0.5 s of imports ends the
-process quietly; the ``run`` and ``sweep`` commands call :func:`restore` first thing (after the
+Importing this module (``thirdbody/__init__.py`` does it first) calls :func:`guard`, which acts
+when the process is the ``thirdbody`` command (or ``python -m thirdbody``), so that an
+interrupt during the ~0.5 s of imports ends the process quietly. It is called here, not after
+the import, so that no instant passes between this module being imported and the guard being in
+place; the ``run`` and ``sweep`` commands call :func:`restore` first thing (after the
 imports and typer's parsing, which would turn a KeyboardInterrupt into a silent exit), and from
 then on Ctrl-C is a ``KeyboardInterrupt`` that they handle (a run keeps its completed steps).
 The other commands end quietly on Ctrl-C. Importing thirdbody as a library leaves the signal alone.
@@ -42,3 +44,6 @@ def restore() -> None:
     """Ctrl-C raises KeyboardInterrupt again (Python's default)."""
     if signal.getsignal(signal.SIGINT) is _quiet:
         signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+guard()
