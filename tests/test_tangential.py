@@ -324,6 +324,51 @@ def test_stick_cells_follow_the_plate_when_the_normal_load_falls(control, drop):
     check_coulomb(step)
 
 
+@pytest.mark.parametrize("ellipse, broyden", [(False, True), (True, True), (True, False)])
+def test_unloading_at_the_verge_of_sliding_moves_the_plate_back(monkeypatch, ellipse, broyden):
+    """Q = 0.9999 μW, then W and Q both lowered by a fifth (the demand held at 0.9999, as a
+    particle at its friction limit unloads): no cell sticks, force control falls back on the
+    shift search, and the shift that transmits the force lies behind the previous one (the
+    search used to look ahead only, and raised). On the sphere and on the turned ellipse under a
+    force at 20° (there with Broyden's correction of the shift's angle and with its fallback):
+    the force is met to 1e-8, and every cell slips against the plate: with the slip
+    w = Δs − (u − u_before) summed cell by cell, τ = μp w/|w| in every contact cell."""
+    import thirdbody.bem.tangential as tangential
+    from _summation import summed
+
+    if not broyden:
+        monkeypatch.setattr(tangential, "_BROYDEN_STEPS", 0)
+    if ellipse:
+        normal = _turned_ellipse()
+        e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
+        w_first = W_ELLIPSE
+    else:
+        _, _, normal = setup(64, 0.3)
+        e = np.array([1.0, 0.0])
+        w_first = W
+    grid, mat = normal.grid, normal.pair
+    first = solve_tangential(normal, MU, force=0.9999 * MU * w_first * e)
+    lower = tb.solve_normal(normal.gap, grid, mat, force=0.8 * w_first)
+    Q = 0.9999 * MU * 0.8 * w_first * e
+    solves = _count_shift_solves(monkeypatch)
+    step = solve_tangential(lower, MU, force=Q, previous=first)
+    assert step.stick.sum() == 0
+    # the secant bracket behind the previous shift and Broyden's correction: 8 solves on the
+    # sphere (doubling from the full-sliding scale: 14), 15 on the ellipse (its fallback: 19)
+    if broyden:
+        assert len(solves) <= (17 if ellipse else 10)
+    force = step.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
+    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
+    assert (step.shift - first.shift) @ e < 0
+    _, before = summed(grid, mat, first.normal.pressure, first.traction, coupled=False)
+    _, after = summed(grid, mat, lower.pressure, step.traction, coupled=False)
+    slip = (step.shift - first.shift)[:, None, None] - (after - before)
+    cells = lower.contact & (lower.pressure > 0)
+    direction = slip[:, cells] / np.hypot(*slip[:, cells])
+    expected = MU * lower.pressure[cells] * direction
+    assert np.abs(step.traction[:, cells] - expected).max() < 1e-6 * MU * lower.pressure.max()
+
+
 def test_symmetric_input_gives_symmetric_output():
     _, _, normal = setup(64, 0.3)
     t = solve_tangential(normal, MU, force=0.7 * MU * W)

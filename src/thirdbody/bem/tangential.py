@@ -593,7 +593,8 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
                     failure, spin, couple):
     """Force control by root finding on the shift increment: along e = Q/|Q| the transmitted
     force F(s e)·e increases monotonically with s (F is the gradient of a convex function of
-    the shift), so it is bracketed and solved by Brent's method (:func:`_root`). When the
+    the shift), so it is bracketed (ahead of the previous shift, or behind it when the force
+    falls: :func:`_bracket_behind`) and solved by Brent's method (:func:`_root`). When the
     contact is not symmetric that force is at an angle to Q: the shift's length and angle are
     then corrected together by Broyden's method (:func:`_broyden`), or, should that fail, one
     at a time (a secant step across e, then a new root along e)."""
@@ -666,7 +667,11 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         # (the step's reference is that traction as it was); solved when it is not below q
         f_lo = -q + float(_force_of(tau0, normal) @ e)
         if f_lo >= 0:
-            f_lo = along(solve(0.0, s_perp))
+            t_zero = solve(0.0, s_perp)
+            f_lo = along(t_zero)
+            if f_lo >= 0:
+                lo, f_lo, hi, f_hi, t_hi = _bracket_behind(solve, along, t_zero, f_lo, s_hi,
+                                                           s_perp, failure)
     for _ in range(10):                     # corrections of the shift's angle
         best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, cap)
         if best is None:
@@ -689,14 +694,14 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         # re-bracket the force along e near the last root: a small step out, doubling
         t_mid = solve(s_best, s_perp)
         f_mid = along(t_mid)
-        step = 0.02 * s_best * (1.0 if f_mid < 0 else -1.0)
+        step = 0.02 * abs(s_best) * (1.0 if f_mid < 0 else -1.0)
         far, t_far = s_best + step, None
         for _ in range(40):
             t_far = solve(far, s_perp)
             if (along(t_far) < 0) != (f_mid < 0):
                 break
             step *= 2.0
-            far = max(s_best + step, 0.0)
+            far = s_best + step
         (lo, f_lo, _), (hi, f_hi, t_hi) = sorted(
             [(s_best, f_mid, t_mid), (far, along(t_far), t_far)], key=lambda x: x[1])
         if f_lo > 0 or f_hi < 0:
@@ -715,9 +720,9 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
     shift's length s and angle s_perp / s, the unknowns here. Its first Jacobian costs no
     solve beyond ``probe`` (at x + (0, h)): the secants to it and to the nearest other solve
     on the same line (the root search's iterates). ``met`` says when the force is met. Returns
-    the step, or None (a step that raised the mismatch tenfold, a shift that would not be
-    positive along e, or ``_BROYDEN_STEPS`` spent: the caller then corrects one component at
-    a time).
+    the step, or None (a step that raised the mismatch tenfold, a shift along e that would
+    change sign, or ``_BROYDEN_STEPS`` spent: the caller then corrects one component at a
+    time).
 
     Broyden, C. G. (1965). A class of methods for solving nonlinear simultaneous equations.
     Math. Comp. 19, 577-593."""
@@ -727,10 +732,10 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
     # (not the root itself, which may come back a rounding away from x)
     line = [(s, step) for s, sp, step in points
             if sp == x[1] and abs(s - x[0]) > 1e-6 * abs(x[0])]
-    if not line or h == 0 or x[0] <= 0:
+    if not line or h == 0 or x[0] == 0:
         return None
     s2, t2 = min(line, key=lambda p: abs(p[0] - x[0]))
-    if s2 <= 0:
+    if s2 * x[0] <= 0:          # the angle s_perp / s is defined on one side of s = 0
         return None
     y, r = polar(*x), mismatch(t)
     start = float(np.abs(r).max())
@@ -745,7 +750,7 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
             dy = -np.linalg.solve(J, r)
         except np.linalg.LinAlgError:
             return None
-        if not np.isfinite(dy).all() or y[0] + dy[0] <= 0:
+        if not np.isfinite(dy).all() or (y[0] + dy[0]) * y[0] <= 0:
             return None
         t_new = solve(float(y[0] + dy[0]), float((y[0] + dy[0]) * (y[1] + dy[1])))
         if met(t_new):
@@ -776,6 +781,28 @@ def _bracket_factor(f: float, q: float, cap: float, jump: int) -> float:
         if jump > 0:
             factor = max(factor, 2.0)
     return max(factor, 1.0 + 1e-3)
+
+
+def _bracket_behind(solve, along, t_zero, f_zero: float, scale: float, s_perp: float,
+                    failure: str):
+    """A bracket [lo, hi] <= 0 of the shift increment along e when the force already exceeds
+    the target with no increment (f_zero = F·e − q >= 0 at s = 0: the force falls, e.g. a
+    particle at its friction limit unloads, and the plate moves back). The force falls slowly
+    while every cell keeps slipping, then fast once cells stick, so the secant through the last
+    two solves, extended to f = 0, lies beyond the root: each step goes there (at least twice
+    as far), starting from -``scale``. Returns (lo, f_lo, hi, f_hi, step at hi)."""
+    hi, f_hi, t_hi = 0.0, f_zero, t_zero
+    lo = -scale
+    for _ in range(60):
+        t_lo = solve(lo, s_perp)
+        f_lo = along(t_lo)
+        if f_lo < 0:
+            return lo, f_lo, hi, f_hi, t_hi
+        reach = 2.0 * lo
+        if f_hi > f_lo:
+            reach = min(reach, lo - 1.5 * f_lo * (hi - lo) / (f_hi - f_lo))
+        hi, f_hi, t_hi, lo = lo, f_lo, t_lo, reach
+    raise ConvergenceError(f"{failure}; no shift transmits the force")
 
 
 class _ForceMet(Exception):
