@@ -213,12 +213,41 @@ def test_displacement_control_matches_force_control():
                                atol=1e-6 * MU * normal.pressure.max())
 
 
-def test_full_sliding():
-    _, _, normal = setup(64, 0.3)
-    t = solve_tangential(normal, MU, force=MU * W)
+@pytest.mark.parametrize("coupling", [False, True])
+def test_full_sliding(coupling):
+    """Q = μP (0.5 N): every cell slips along x at μp, and the shift is the smallest one with
+    which every cell slips forwards: with the slip w = Δs − u_t summed cell by cell (with
+    coupling also the pressure's tangential displacement, the normal load applied in this
+    step), min w·x over the contact is 0. The reported displacement is the summed one."""
+    from _summation import summed
+
+    mat, _, normal = setup(64, 0.3)
+    extra = {"coupling": True, "previous_pressure": np.zeros(normal.grid.shape)} \
+        if coupling else {}
+    t = solve_tangential(normal, MU, force=MU * W, **extra)
     assert t.full_sliding and not t.stick.any()
     np.testing.assert_allclose(t.traction[0], MU * normal.pressure, rtol=1e-12)
     assert t.shift[0] > 0
+    _, u_t = summed(normal.grid, mat, normal.pressure, t.traction, coupled=coupling)
+    slip = t.shift[0] - u_t[0][normal.contact]
+    assert slip.min() == pytest.approx(0.0, abs=1e-9 * np.abs(u_t[0]).max())
+    np.testing.assert_allclose(t.displacement, u_t, rtol=0, atol=1e-9 * np.abs(u_t).max())
+
+
+@pytest.mark.parametrize("coupling", [False, True])
+def test_frictionless_contact_reports_the_pressures_displacement(coupling):
+    """μ = 0, no tangential force: no traction, and the tangential displacement reported is
+    the pressure's (with coupling) or none, summed cell by cell; the twist is carried over."""
+    from _summation import summed
+
+    mat, _, normal = setup(64, 0.3)
+    extra = {"coupling": True, "previous_pressure": np.zeros(normal.grid.shape)} \
+        if coupling else {}
+    t = solve_tangential(normal, 0.0, force=(0.0, 0.0), twist=1e-4, **extra)
+    assert not t.traction.any() and t.twist == 1e-4
+    _, u_t = summed(normal.grid, mat, normal.pressure, t.traction, coupled=coupling)
+    np.testing.assert_allclose(t.displacement, u_t, rtol=0,
+                               atol=1e-9 * max(np.abs(u_t).max(), 1e-300))
 
 
 def test_force_above_the_friction_limit_is_refused():
