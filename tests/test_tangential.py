@@ -415,6 +415,25 @@ def test_scalar_and_vector_agree_without_poisson_coupling():
     assert sca.shift[0] == pytest.approx(vec.shift[0], rel=1e-7)
 
 
+def test_the_scalar_approximation_drops_the_transverse_traction():
+    """At ν = 0.3 the full problem has a small τ_y (the x-y coupling through ν) and the scalar
+    approximation none; both transmit the force along x, and the scalar one's stick cells
+    follow the plate in x (K_xx τ_x summed cell by cell equals the shift). It used to raise:
+    its Coulomb residual counted the slip along y that it ignores."""
+    from _summation import summed
+
+    mat, _, normal = setup(64, 0.3)
+    vec = solve_tangential(normal, MU, force=0.6 * MU * W)
+    sca = solve_tangential(normal, MU, force=0.6 * MU * W, scalar=True)
+    assert np.abs(vec.traction[1]).max() > 1e-3 * vec.traction[0].max()
+    assert not sca.traction[1].any() and not sca.slip_increment[1].any()
+    assert sca.force[0] == pytest.approx(0.6 * MU * W, rel=1e-8)
+    assert sca.residual < 1e-7 and sca.stick.sum() > 50
+    _, u_t = summed(normal.grid, mat, normal.pressure, sca.traction, coupled=False)
+    np.testing.assert_allclose(u_t[0][sca.stick], sca.shift[0], rtol=1e-6)
+    assert (np.abs(sca.traction[0]) <= MU * normal.pressure * (1 + 1e-12)).all()
+
+
 def test_frictionless_contact_without_force_carries_no_traction():
     """μ = 0 with no tangential force (a particle resting upright between frictionless plates):
     zero traction, every contact cell free to slip, the plate does not move."""

@@ -577,7 +577,7 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
             dsv = ds_prescribed
         try:
             return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol,
-                           rigid=rigid, spin=spin, coupled=coupled)
+                           rigid=rigid, spin=spin, coupled=coupled, scalar=scalar)
         except ConvergenceError as exc:
             failure = str(exc)
     if Q is None:
@@ -861,7 +861,7 @@ def _force_of(traction: np.ndarray, normal: NormalContact) -> np.ndarray:
 
 
 def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False,
-            rigid=None, spin=None, coupled=None):
+            rigid=None, spin=None, coupled=None, scalar=False):
     grid = normal.grid
     contact = normal.contact
     limit = mu * normal.pressure
@@ -870,6 +870,8 @@ def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=
     if rigid is not None:
         w = w + rigid
     w[:, ~contact] = 0.0
+    if scalar:
+        w[1] = 0.0          # the scalar approximation ignores u_y (and so the slip along y)
     norm_tau = np.hypot(tau[0], tau[1])
     slip = contact & (norm_tau >= limit * (1 - 1e-9))
     stick = contact & ~slip
