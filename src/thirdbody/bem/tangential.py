@@ -632,7 +632,7 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
         # shift's length (see _root), the second in its angle; F·e would mix the two (the
         # angle lowers it to second order, as much as the last 1e-4 of the length does)
         f = float(np.hypot(*t.force))
-        h = np.sqrt((cap - q) / max(cap - f, 1e-300)) - 1.0 if cap > q else f - q
+        h = _straightened(f, q, cap) if cap > q else f - q
         return np.array([h, float(np.arctan2(t.force @ e_perp, t.force @ e))])
 
     # scale: the shift of full sliding along e (all cells slip once the plate has moved past
@@ -709,6 +709,13 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
     raise ConvergenceError(f"{failure}; the shift search did not converge either")
 
 
+def _straightened(force: float, q: float, cap: float) -> float:
+    """The force transmitted along e (N) as (μF_N − q)^½ / (μF_N − force)^½ − 1: zero at the
+    target q, increasing with the force, and nearly linear in the shift near full sliding, where
+    the deficit μF_N − force falls as 1/(s − s₀)² (``cap`` = μF_N > q)."""
+    return float(np.sqrt((cap - q) / max(cap - force, 1e-300))) - 1.0
+
+
 #: Broyden steps of the shift search before it falls back on one component at a time
 _BROYDEN_STEPS = 8
 
@@ -777,7 +784,7 @@ def _bracket_factor(f: float, q: float, cap: float, jump: int) -> float:
     the shift, so a force that bends over differently is still bracketed."""
     factor = 2.0
     if cap > q:
-        factor = _BRACKET_MARGIN * float(np.sqrt((cap - q - f) / (cap - q)))
+        factor = _BRACKET_MARGIN / (_straightened(q + f, q, cap) + 1.0)
         if jump > 0:
             factor = max(factor, 2.0)
     return max(factor, 1.0 + 1e-3)
@@ -829,9 +836,7 @@ def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_
 
     def value(f: float) -> float:
         # increasing with f, zero at the root, linear in s where the deficit goes as 1/(s − s₀)²
-        if model:
-            return float(np.sqrt((cap - q) / max(cap - q - f, 1e-300))) - 1.0
-        return f
+        return _straightened(q + f, q, cap) if model else f
 
     known = {lo: value(f_lo), hi: value(f_hi)}          # the bracket's ends, solved already
     best = [t_hi, abs(f_hi)]
