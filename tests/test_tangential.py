@@ -216,14 +216,22 @@ def test_displacement_control_matches_force_control():
 @pytest.mark.parametrize("coupling", [False, True])
 def test_full_sliding(coupling):
     """Q = μP (0.5 N): every cell slips along x at μp, and the shift is the smallest one with
-    which every cell slips forwards: with the slip w = Δs − u_t summed cell by cell (with
-    coupling also the pressure's tangential displacement, the normal load applied in this
-    step), min w·x over the contact is 0. The reported displacement is the summed one."""
+    which every cell slips forwards (with coupling on an egg-shaped contact): with the slip
+    w = Δs − u_t summed cell by cell (with coupling also the pressure's tangential
+    displacement, the normal load applied in this step), min w·x over the contact is 0. The
+    reported displacement is the summed one."""
     from _summation import summed
 
-    mat, _, normal = setup(64, 0.3)
-    extra = {"coupling": True, "previous_pressure": np.zeros(normal.grid.shape)} \
-        if coupling else {}
+    mat, R, normal = setup(64, 0.3)
+    extra = {}
+    if coupling:
+        # an egg-shaped gap: a contact with no point symmetry (on a symmetric one the largest
+        # forward displacement is the same with the pressure's term of either sign)
+        grid = normal.grid
+        X, Y = grid.mesh()
+        gap = (np.where(X < 0, 2.0, 1.0) * X**2 + Y**2) / (2 * R)
+        normal = tb.solve_normal(gap, grid, mat, force=W)
+        extra = {"coupling": True, "previous_pressure": np.zeros(grid.shape)}
     t = solve_tangential(normal, MU, force=MU * W, **extra)
     assert t.full_sliding and not t.stick.any()
     np.testing.assert_allclose(t.traction[0], MU * normal.pressure, rtol=1e-12)
