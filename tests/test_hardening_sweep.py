@@ -176,3 +176,29 @@ def test_ctrl_c_stops_a_sweep_with_one_line_and_no_error_files(tmp_path):
     assert "Traceback" not in err and "CommClosedError" not in err, err
     assert err.strip().splitlines()[-1].startswith("interrupted"), err
     assert not list((out / "cases").glob("*.error.txt"))
+
+
+@pytest.mark.slow
+def test_an_interrupt_quiets_the_workers_logs_before_the_cluster_closes(monkeypatch):
+    # the CI's one red run: a worker whose heartbeat met the closing scheduler logged an ERROR
+    # with a traceback to the terminal. Its logs must be quiet before anything is closed.
+    import logging
+
+    from dask.distributed import Client
+
+    from thirdbody.sweep import _dask_client
+
+    seen = []
+    close = Client.close
+
+    def spying_close(self, *args, **kwargs):
+        seen.append(self.run(lambda: logging.getLogger("distributed").level))
+        return close(self, *args, **kwargs)
+
+    monkeypatch.setattr(Client, "close", spying_close)
+    with pytest.raises(KeyboardInterrupt), _dask_client(None, None, 2, True) as client:
+        assert set(client.run(lambda: logging.getLogger("distributed").level).values()) \
+            != {logging.CRITICAL}
+        raise KeyboardInterrupt
+    assert len(seen) == 1 and len(seen[0]) == 2
+    assert set(seen[0].values()) == {logging.CRITICAL}

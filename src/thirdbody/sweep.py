@@ -617,6 +617,14 @@ def _up_to_date(out: Path, text: str, cases: list[Case], plots: bool) -> bool:
     return min(f.stat().st_mtime_ns for f in files[1:]) >= newest
 
 
+def _quiet_logs() -> None:
+    """Raise dask's, tornado's and asyncio's loggers to CRITICAL in this process."""
+    import logging
+
+    for name in ("distributed", "tornado", "asyncio"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
 @contextmanager
 def _dask_client(client, scheduler: str | None, workers: int | None, needed: bool,
                  timeout: float = 30.0):
@@ -657,8 +665,11 @@ def _dask_client(client, scheduler: str | None, workers: int | None, needed: boo
         except KeyboardInterrupt:
             # closing the cluster after an interrupt logs connection errors and may fail: not
             # for the user, who gets one line from the command
-            for name in ("distributed", "tornado", "asyncio"):
-                logging.getLogger(name).setLevel(logging.CRITICAL)
+            _quiet_logs()
+            # the workers too: one whose heartbeat meets the closing scheduler logs an ERROR
+            # with a traceback to the terminal they share with this process
+            with contextlib.suppress(Exception):
+                own.run(_quiet_logs, on_error="ignore", callback_timeout=5)
             for close in (own.close, cluster.close):
                 with contextlib.suppress(Exception):
                     close(timeout=10)
