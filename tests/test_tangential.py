@@ -242,6 +242,34 @@ def test_full_sliding(coupling):
     np.testing.assert_allclose(t.displacement, u_t, rtol=0, atol=1e-9 * np.abs(u_t).max())
 
 
+def test_full_sliding_after_a_step_and_with_a_twist():
+    """Full sliding from a partially slipping state (Q = 0.6 μP), the plate also twisted by ω
+    about the origin: the slip increment is w = Δs + ω(−y, x) − (u_t − u_t⁰), with both
+    displacements summed cell by cell, and the shift increment is the smallest with which
+    every cell slips forwards along x: min w_x over the contact is 0 (mutmut: the previous
+    traction added instead of subtracted, and the twist dropped from the reported slip, both
+    survived the tests from a state at rest)."""
+    from _summation import summed
+
+    mat, _, normal = setup(64, 0.3)
+    before = solve_tangential(normal, MU, force=0.6 * MU * W)
+    omega = 0.01                                    # rad: ω a = 1.2 µm at a = 125 µm
+    t = solve_tangential(normal, MU, force=MU * W, previous=before, twist=omega)
+    assert t.full_sliding and t.twist == omega
+    grid = normal.grid
+    _, u_before = summed(grid, mat, normal.pressure, before.traction, coupled=False)
+    _, u_t = summed(grid, mat, normal.pressure, t.traction, coupled=False)
+    X, Y = grid.mesh()
+    ds = t.shift - before.shift
+    assert ds[1] == 0.0 and ds[0] > 0
+    w = ds[:, None, None] + omega * np.stack([-Y, X]) - (u_t - u_before)
+    contact = normal.contact
+    scale = np.abs(w[:, contact]).max()
+    assert w[0][contact].min() == pytest.approx(0.0, abs=1e-9 * scale)
+    np.testing.assert_allclose(t.slip_increment[:, contact], w[:, contact], rtol=0,
+                               atol=1e-9 * scale)
+
+
 @pytest.mark.parametrize("coupling", [False, True])
 def test_frictionless_contact_reports_the_pressures_displacement(coupling):
     """μ = 0, no tangential force: no traction, and the tangential displacement reported is
