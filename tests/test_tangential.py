@@ -570,3 +570,49 @@ def test_preconditioners_invert_the_operators_on_smooth_and_rough_fields():
                                   bump * np.cos(2.2 * x) * np.cos(1.1 * y)]), 0.03)):
         back = T.precondition(T(field))
         assert np.abs(back - field)[core].max() < tol * np.abs(field).max()
+
+
+@pytest.mark.parametrize("traction, slip, expected", [
+    ((0.5, 0.0), (0.0, 0.0), 0.0),                  # stick, no slip
+    ((0.5, 0.0), (0.4, 0.0), 0.2),                  # inside the disc yet slipping: τ + w/k₀ = 0.7
+    ((1.0, 0.0), (2.0, 0.0), 0.0),                  # on the disc, slipping along τ
+    ((0.0, 1.0), (2.0, 0.0), np.hypot(1 - 2**-0.5, 2**-0.5)),  # slipping across τ
+    ((-1.0, 0.0), (4.0, 0.0), 2.0),                 # slipping against τ: τ + w/k₀ = (1, 0)
+])
+def test_coulomb_residual_by_hand(traction, slip, expected):
+    """The natural residual |τ − Π(τ + w/k₀)| / (μ max p), worked out by hand: μ = 0.5 on
+    p = 2 Pa (limit 1 Pa), k₀ = 2 m/Pa, and a second cell at p = 1 Pa with no traction and
+    no slip (μ max p is 1 Pa). It is the solver's last guard (mutmut: w·k₀ for w/k₀ made it
+    pass anything, and no test noticed)."""
+    from thirdbody.bem.tangential import coulomb_residual
+
+    tau = np.zeros((2, 1, 2))
+    w = np.zeros((2, 1, 2))
+    tau[:, 0, 0], w[:, 0, 0] = traction, slip
+    p = np.array([[2.0, 1.0]])
+    assert coulomb_residual(tau, w, p, 0.5, 2.0) == pytest.approx(expected, abs=1e-15)
+
+
+def test_a_wrong_answer_from_the_active_set_is_never_returned(monkeypatch):
+    """The solver's answer is checked against Coulomb's law with displacements recomputed from
+    the traction: an active-set solution spoiled after the fact (every stick traction 1 %
+    off) raises ConvergenceError, in force control and in displacement control."""
+    from thirdbody.bem import tangential
+    from thirdbody.bem.normal import ConvergenceError
+
+    _, _, normal = setup(32, 0.3)
+    good = solve_tangential(normal, MU, force=0.5 * MU * W)
+    solve = tangential._active_set
+
+    def spoiled(*args, **kwargs):
+        out = solve(*args, **kwargs)
+        if out is None:
+            return None
+        tau, du, ds, stick, iterations = out
+        return np.where(stick, 1.01 * tau, tau), du, ds, stick, iterations
+
+    monkeypatch.setattr(tangential, "_active_set", spoiled)
+    with pytest.raises(ConvergenceError, match="Coulomb residual"):
+        solve_tangential(normal, MU, shift=good.shift)
+    with pytest.raises(ConvergenceError):
+        solve_tangential(normal, MU, force=0.5 * MU * W)
