@@ -620,3 +620,23 @@ def test_a_wrong_answer_from_the_active_set_is_never_returned(monkeypatch):
         solve_tangential(normal, MU, shift=good.shift)
     with pytest.raises(ConvergenceError):
         solve_tangential(normal, MU, force=0.5 * MU * W)
+
+
+def test_a_force_missed_by_the_active_set_is_never_returned(monkeypatch):
+    """The force, like Coulomb's law, is checked from the tractions: an active set handed a
+    force 1 % off (an answer that obeys Coulomb's law for the wrong load) is not returned;
+    the shift search takes over and meets the prescribed force."""
+    from thirdbody.bem import tangential
+
+    _, _, normal = setup(32, 0.3)
+    solve = tangential._active_set
+
+    def misled(K, tau0, limit, contact, dA, force, *args, **kwargs):
+        force = None if force is None else 1.01 * np.asarray(force)
+        return solve(K, tau0, limit, contact, dA, force, *args, **kwargs)
+
+    monkeypatch.setattr(tangential, "_active_set", misled)
+    t = solve_tangential(normal, MU, force=(0.5 * MU * W, 0.1 * MU * W))
+    check_coulomb(t)
+    np.testing.assert_allclose(t.force, (0.5 * MU * W, 0.1 * MU * W), rtol=0,
+                               atol=1e-8 * MU * W)

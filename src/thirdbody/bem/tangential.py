@@ -442,7 +442,8 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         ``twist_centre`` (m), rad, counter-clockwise seen from +z; default: the previous
         step's (no increment). Its increment moves the plate by Δω (−(y − y_c), x − x_c) on
         top of the uniform shift; the moment it needs is :attr:`TangentialContact.moment`.
-        Full sliding ignores it.
+        In full sliding the tractions stay μp along the force and the twist enters only the
+        slip increment.
     coupling : bool
         Normal-tangential coupling: the pressure's change since the previous step moves the
         surface tangentially, Δu = -(K_zx, K_zy) * (p − p_prev) (reciprocal to Cerruti's normal
@@ -452,6 +453,15 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         With ``coupling``: the previous step's pressure on this grid, Pa (default:
         ``previous.normal.pressure``, or zero without ``previous``: the normal load was applied
         in this step).
+
+    Raises
+    ------
+    ConvergenceError
+        No step was found whose Coulomb residual, recomputed from the tractions, is within
+        10 ``tol``, or (force control) whose force, summed from the tractions, is the
+        prescribed one within ``tol`` μF_N. A wrong answer is never returned.
+    FrictionLimitError
+        |force| > μF_N.
 
     Notes
     -----
@@ -576,10 +586,17 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         if ds_prescribed is not None:
             dsv = ds_prescribed
         try:
-            return _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol,
-                           rigid=rigid, spin=spin, coupled=coupled, scalar=scalar)
+            t = _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol,
+                        rigid=rigid, spin=spin, coupled=coupled, scalar=scalar)
         except ConvergenceError as exc:
             failure = str(exc)
+        else:
+            # the force too is checked from the tractions, as Coulomb's law is (the active set
+            # holds it to round-off); a miss goes on to the shift search below
+            if Q is None or np.abs(t.force - Q).max() <= max(tol, 1e-12) * cap:
+                return t
+            failure = (f"tangential solver: force ({t.force[0]:.6g}, {t.force[1]:.6g}) N "
+                       f"misses the prescribed ({Q[0]:.6g}, {Q[1]:.6g}) N")
     if Q is None:
         raise ConvergenceError(failure)
     # force control failed: typically close to full sliding, where the stick zone is a few
