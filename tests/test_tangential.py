@@ -28,6 +28,9 @@ def check_coulomb(t):
     assert t.force == pytest.approx(t.traction.reshape(2, -1).sum(axis=1) * t.normal.grid.cell_area)
     assert not (t.stick & t.slip).any()
     assert ((t.stick | t.slip) == t.normal.contact).all()
+    # what the step reports about itself (mutmut: each of these could be anything)
+    assert t.converged is True and t.mu == MU
+    assert t.full_sliding == (not t.stick.any())
 
 
 @pytest.mark.parametrize("nu, n", [(0.0, 128), (0.3, 64), (0.3, 128), (0.5, 128)])
