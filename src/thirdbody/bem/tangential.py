@@ -884,7 +884,6 @@ def _force_of(traction: np.ndarray, normal: NormalContact) -> np.ndarray:
 
 def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False,
             rigid=None, spin=None, coupled=None, scalar=False):
-    grid = normal.grid
     contact = normal.contact
     limit = mu * normal.pressure
     du = K(tau - tau0)
@@ -905,7 +904,7 @@ def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=
     displacement = K(tau) if coupled is None else K(tau) + coupled
     return TangentialContact(
         traction=tau, displacement=displacement, shift=prev_shift + ds,
-        force=tau.reshape(2, -1).sum(axis=1) * grid.cell_area, stick=stick, slip=slip,
+        force=_force_of(tau, normal), stick=stick, slip=slip,
         slip_increment=w, mu=float(mu), normal=normal, iterations=iterations,
         residual=residual, converged=True, full_sliding=bool(full or not stick.any()),
         **(spin or {}))
