@@ -24,7 +24,7 @@ def run(theta0=20.0, mu=0.6, mu_low=None, E=210e9, load=None, resolution=100, ti
                                     tilt_axis, yaw),
                         tb.Plates(mu, mu_low), load or tb.LinearRamp(stop=1.0, steps=2),
                         resolution=resolution, **kw)
-    return sim, sim.run()
+    return sim, tb.particle_view(sim.run())
 
 
 def test_stiff_particle_reproduces_the_rigid_criterion():
@@ -190,7 +190,7 @@ def test_a_load_the_particle_cannot_take_stops_the_run_with_a_message():
                         maps_every=0)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        ds = sim.run()
+        ds = tb.particle_view(sim.run())
     assert sim.status.startswith("failed: step 1")
     assert "particle" in sim.status
     assert ds.sizes["step"] == 1
@@ -225,7 +225,7 @@ def test_paper_fig4_smaller_friction_turns_further_then_sticks():
     for mu in (0.3, 0.2):
         sim = tb.Simulation(tb.Particle(shape, tb.Material(1e9, 0.3), -41.0), tb.Plates(mu),
                             tb.LinearRamp(stop=10.0, steps=4), resolution=60, maps_every=0)
-        ds = sim.run()
+        ds = tb.particle_view(sim.run())
         assert sim.status == "complete"
         assert ds.turned.values.tolist() == [1, 0, 0, 0]
         assert (ds.ratio.values[1:] < 1).all()
@@ -284,7 +284,7 @@ def test_narrow_stable_band_of_a_flat_ellipsoid_is_found(theta0):
     edge = math.degrees(brentq(lambda t: xi(t) - 0.1, 1e-6, 0.1))
     sim = tb.Simulation(tb.Particle(Ellipsoid((a, 0.45e-3, c)), tb.Material(5e9, 0.3), theta0),
                         tb.Plates(0.1), tb.ForceTable([0.1]), resolution=80, maps_every=0)
-    ds = sim.run()
+    ds = tb.particle_view(sim.run())
     assert sim.status == "complete"
     theta = float(ds.orientation.sel(component="y")[0])
     assert edge - 0.03 <= theta <= edge + 0.01
@@ -298,7 +298,7 @@ def test_without_friction_the_ellipsoid_turns_flat():
     sim = tb.Simulation(tb.Particle(Ellipsoid((0.8e-3, 0.45e-3, 0.2e-3)), tb.Material(5e9, 0.3),
                                     7.5), tb.Plates(0.0), tb.ForceTable([0.1, 0.2]),
                         resolution=80, maps_every=1)
-    ds = sim.run()
+    ds = tb.particle_view(sim.run())
     assert sim.status == "complete"
     assert abs(float(ds.orientation.sel(component="y")[0])) < 1e-4
     assert int(ds.balanced[0]) == 1
@@ -320,7 +320,7 @@ def test_an_upright_sphere_between_frictionless_plates_runs():
     """The crash of the issue: μ = 0 and F' = 0 exactly, a zero-force tangential solve."""
     sim = tb.Simulation(tb.Particle(tb.shapes.Sphere(0.5e-3), STEEL), tb.Plates(0.0),
                         tb.LinearRamp(stop=1.0, steps=2), resolution=60, maps_every=0)
-    ds = sim.run()
+    ds = tb.particle_view(sim.run())
     assert sim.status == "complete"
     assert (ds.state.values == 0).all() and not ds.tangential_force.values.any()
 
@@ -357,7 +357,7 @@ def test_force_and_moment_balance_from_the_stored_maps():
     sim = tb.Simulation(tb.Particle(shape, tb.Material(1e9, 0.3), -41.0, tilt_axis_deg=60.0),
                         tb.Plates(0.25), tb.LinearRamp(stop=4.0, steps=2), resolution=50,
                         maps_every=1)
-    ds = sim.run()
+    ds = tb.particle_view(sim.run())
     assert sim.status == "complete" and ds.turned.values.any()
     X, Y = np.meshgrid(ds.map_x.values, ds.map_y.values)
     dA = float(ds.map_x[1] - ds.map_x[0]) ** 2
@@ -510,7 +510,7 @@ def test_preflight_measures_the_contact_and_refuses_a_coarse_resolution():
     sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), tb.Material(1e9, 0.3), 20.0),
                         tb.Plates(0.6), tb.LinearRamp(stop=1.0, steps=2), resolution=100)
     extent = sim.preflight()
-    ds = sim.run()
+    ds = tb.particle_view(sim.run())
     assert ds.rotation_angle.values.max() == 0           # sticks: the last step is the same
     widths = []
     for side in ("upper", "lower"):
@@ -533,13 +533,13 @@ def test_a_run_resumed_from_a_snapshot_ends_as_an_uninterrupted_one():
                              tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=4), resolution=60,
                              maps_every=2)
 
-    straight = make().run()
+    straight = tb.particle_view(make().run())
     first = make()
     blobs = []
     first.run(checkpoint=lambda sim, state: blobs.append(sim.snapshot(state)))
     _, next_step = make().restore(blobs[1])
     assert next_step == 2
-    ds = make().run(resume_from=blobs[1])
+    ds = tb.particle_view(make().run(resume_from=blobs[1]))
     assert ds.map_step.values.tolist() == [0, 2, 3]          # every 2nd step and the last
     timing = [v for v in ds.data_vars if v.startswith("time_")]
     assert ds.drop_vars(timing).identical(straight.drop_vars(timing))

@@ -234,7 +234,8 @@ def test_cli_single_particle(potato_file, tmp_path, capsys):
     assert export_vtk_cli(path, out) == 0
     printed = capsys.readouterr().out.strip()
     assert printed.count("\n") == 0 and str(out) in printed and "2 steps" in printed
-    ds = open_results(path)
+    full = open_results(path)
+    ds = tb.particle_view(full)
     assert sorted(p.name for p in out.iterdir()) == [
         "layer.pvd", "plates_0000.vtu", "plates_0001.vtu", "step_0000.vtu", "step_0001.vtu"]
     shape = particle.shape
@@ -287,8 +288,9 @@ def test_maps_follow_each_interface(potato_file, tmp_path):
     """The rolled potato touches the plates off-centre, on opposite sides: the pressure painted
     near each plate is centred where that interface's map is."""
     path, particle = potato_file
-    ds = open_results(path)
-    export_vtk(ds, tb.Layer.of(particle), tmp_path, subdivisions=5)
+    full = open_results(path)
+    ds = tb.particle_view(full)
+    export_vtk(full, tb.Layer.of(particle), tmp_path, subdivisions=5)
     cell = float(ds.map_x.values[1] - ds.map_x.values[0])
     X, Y = np.meshgrid(ds.map_x.values, ds.map_y.values)
     for step in range(2):

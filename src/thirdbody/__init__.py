@@ -13,14 +13,16 @@ Public API::
     Plates(mu_up, mu_low)
     Simulation(particle, plates, LinearRamp(stop=F, steps=n)).run() -> xarray.Dataset
     Layer([PlacedParticle(particle, (x, y)), ...]), Layer.random(...)   many particles
-    Simulation(layer, plates, load).run()  -> xarray.Dataset along (step, particle)
+    Simulation(layer, plates, load).run()  -> the same dataset form, along (step, particle)
+    particle_view(ds, i)                one particle's results (no particle dimension)
+    schema.VARIABLES                    every output variable: dims, units, long name
 """
 
 # first: for the thirdbody command only, Ctrl-C during these imports exits 130 quietly (the
 # guard is installed as the module is imported)
 from . import _interrupt  # noqa: F401, I001
 
-from . import orientation
+from . import orientation, schema
 from ._citations import citations
 from ._version import __version__
 from .bem import (
@@ -38,6 +40,7 @@ from .layer import Layer, LayerError, PlacedParticle
 from .loading import ForceTable, GapRamp, HoldThenRamp, LinearRamp
 from .material import Material
 from .particle import Particle, Plates
+from .records import particle_view
 from .simulation import Simulation, SimulationError, SimulationStoppedWarning
 
 __all__ = [
@@ -63,6 +66,8 @@ __all__ = [
     "__version__",
     "citations",
     "orientation",
+    "particle_view",
+    "schema",
     "set_workers",
     "solve_normal",
     "solve_tangential",

@@ -29,6 +29,19 @@ def _plt():
     return plt
 
 
+def _one(ds):
+    """One particle's view of a results dataset (:func:`thirdbody.records.particle_view`);
+    a view (no ``particle`` dimension) as it is."""
+    from .records import particle_view
+
+    if "particle" not in ds.dims:
+        return ds
+    if ds.sizes["particle"] != 1:
+        raise ValueError(f"this figure draws one particle; the results have "
+                         f"{ds.sizes['particle']}: pass particle_view(ds, i)")
+    return particle_view(ds)
+
+
 def _inputs(ds) -> dict:
     return json.loads(ds.attrs.get("inputs", "{}"))
 
@@ -84,6 +97,7 @@ def state_curve(ds, labels: dict[int, str] | None = None):
     ``labels`` maps step indices to letters written next to the curve.
     """
     plt = _plt()
+    ds = _one(ds)
     i = _inputs(ds)
     c = ds.compression.values
     ratio = {side: ds.ratio.sel(interface=side).values for side in ("upper", "lower")}
@@ -122,6 +136,7 @@ def orientation_history(ds):
     paper's θ; otherwise both components of the tilt vector are drawn, and the turn axis of
     each turning step is shown in a top view."""
     plt = _plt()
+    ds = _one(ds)
     c = ds.compression.values
     planar = _planar(ds)
     if planar:
@@ -223,6 +238,7 @@ def contact_maps(ds, steps: list[int] | None = None):
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
 
+    ds = _one(ds)
     stored = list(ds.map_step.values)
     if steps is None:
         steps = sorted({stored[0], stored[len(stored) // 2], stored[-1]})
@@ -280,19 +296,20 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
              layer=None) -> list[Path]:
     """Write every figure for ``ds`` into ``out`` (created); returns the files written.
 
-    For a layer's results (a ``particle`` dimension) the figures are :func:`layer_top_view`
+    For the results of a layer of several particles the figures are :func:`layer_top_view`
     (at ``map_steps`` if given, drawing the true outlines of ``layer``, a
     :class:`thirdbody.Layer`, or of the layer rebuilt from the run's ``config`` attribute),
     :func:`load_shares`, :func:`state_fractions` and :func:`particle_ratios`; ``labels`` is not
     used then."""
     plt = _plt()
-    if "particle" in ds.dims:
+    if ds.sizes.get("particle", 1) > 1:
         if layer is None:
             layer = _layer_from_config(ds)
         figures = {"layer_top_view": layer_top_view(ds, map_steps, layer),
                    "load_shares": load_shares(ds), "state_fractions": state_fractions(ds),
                    "particle_ratios": particle_ratios(ds)}
         return _save_figures(plt, figures, out, formats)
+    ds = _one(ds)
     figures = {"state": state_curve(ds, labels), "orientation": orientation_history(ds)}
     if "map_step" in ds.dims and ds.sizes["map_step"]:
         figures["contact_maps"] = contact_maps(ds, map_steps)

@@ -1,10 +1,11 @@
-"""What a simulation records, in one table: every per-step variable with its dimensions, units
-and long name, and the assembly of the records and maps into an :class:`xarray.Dataset`.
+"""What a step records, and the results dataset built from the records.
 
-Dimensions: ``step``; ``interface`` = ("upper", "lower"); ``component`` = ("x", "y") for
-horizontal vectors; ``quaternion_component`` = ("x", "y", "z", "w"). Maps live on ``map_step``,
-``interface`` (and ``component``), ``map_y``, ``map_x``; their coordinates are the lattice cell
-centres in the particle frame (m), covering every stored contact.
+Every variable is declared once, in :mod:`thirdbody.schema`; this module computes the values
+(:func:`particle_record` from a particle's solves, :func:`unloaded_record` for a particle the
+plates do not press, :meth:`LayerRecord.from_particles` for the plates' totals) and assembles
+them, with the maps, into one dataset form (:meth:`DatasetSpec.build`): a single particle is a
+layer of one, with a ``particle`` dimension of size 1. :func:`particle_view` gives one particle's
+variables without that dimension, maps on their metre coordinates.
 """
 
 from __future__ import annotations
@@ -16,112 +17,27 @@ from typing import Any
 
 import numpy as np
 
+from . import schema
 from ._version import __version__
+from .particle.interface import surface_approach
+from .rigid import RigidState
+from .schema import INTERFACES, STATES
 
-__all__ = ["INTERFACES", "LAYER_VARIABLES", "MAP_VARIABLES", "STATES", "VARIABLES",
-           "DatasetSpec", "LayerRecord", "StepMaps", "StepRecord", "Variable", "direction_sign",
-           "has_maps", "layer_dataset", "map_frame", "maps_step", "orientation_label",
-           "to_dataset", "union_frames"]
-
-#: State codes stored in the results (``state`` variable, with ``flag_values``/``flag_meanings``).
-STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
-STATE_CODE = {name: i for i, name in enumerate(STATES)}
-INTERFACES = ("upper", "lower")
-COMPONENTS = ("x", "y")
+__all__ = ["INTERFACES", "STATES", "DatasetSpec", "LayerRecord", "StepMaps", "StepRecord",
+           "direction_sign", "has_maps", "map_frame", "maps_step", "orientation_label",
+           "particle_record", "particle_view", "step_maps", "union_frames", "unloaded_record"]
 
 
-@dataclass(frozen=True)
-class Variable:
-    """A recorded quantity: its dimensions besides ``step``, units and long name."""
-
-    name: str
-    dims: tuple[str, ...]
-    units: str
-    long_name: str
-
-
-def _v(name: str, dims: str, units: str, long_name: str) -> Variable:
-    return Variable(name, tuple(dims.split()) if dims else (), units, long_name)
-
-
-#: every per-step variable (the record's fields are exactly these names)
-VARIABLES: tuple[Variable, ...] = (
-    _v("load_value", "", "N", "prescribed load: F_N (N) or compression ratio (1), see load_kind"),
-    _v("normal_force", "", "N", "normal force F_N on each plate"),
-    _v("plate_gap", "", "m", "plate separation h"),
-    _v("compression", "", "1", "compression ratio (d0 - h) / d0"),
-    _v("quaternion", "quaternion_component", "1",
-       "orientation at the end of the step: unit quaternion (x, y, z, w), body to world"),
-    _v("orientation", "component", "degree",
-       "tilt vector at the end of the step: tilt angle times its horizontal axis (the paper's "
-       "theta about +y is the y component)"),
-    _v("tilt", "", "degree", "tilt angle of the body z axis from the vertical"),
-    _v("tilt_azimuth", "", "degree", "azimuth of the tilt axis, from +x towards +y"),
-    _v("yaw", "", "degree", "rotation about the body z axis before the tilt"),
-    _v("rotation", "component", "degree",
-       "rotation vector of the turn in this step (horizontal components)"),
-    _v("rotation_angle", "", "degree", "angle turned in this step"),
-    _v("state", "", "1", "what the particle did in the step"),
-    _v("turned", "", "1", "the particle turned in this step"),
-    _v("balanced", "", "1", "the turn ended at a balance of the couple, not inside the "
-                            "friction limit"),
-    _v("tangential_force", "component", "N",
-       "F' = F_N (r_up - r_low) / h: force of the lower plate on the particle"),
-    _v("demand_ratio", "interface", "1", "|F'| / (mu F_N) at the step's starting orientation"),
-    _v("ratio", "interface", "1",
-       "|F_T| / (mu F_N) at the final orientation: a magnitude, >= 0 (the state plot and the "
-       "sweep summary sign it by the direction of F' against its first non-zero direction)"),
-    _v("centroid", "interface component", "m", "pressure centroid (particle frame)"),
-    _v("approach", "interface", "m", "approach of the plate from its first contact with the "
-                                     "surface cells"),
-    _v("contact_area", "interface", "m2", "contact area"),
-    _v("stick_area", "interface", "m2", "stick area"),
-    _v("spots", "interface", "1", "number of separate contact spots"),
-    _v("position", "component", "m", "horizontal displacement of the particle centroid"),
-    _v("centroid_height", "", "m", "height of the particle's centroid above the lower plate"),
-    _v("slip", "interface component", "m",
-       "accumulated slip of the particle over the plate while turning"),
-    _v("shift", "interface component", "m",
-       "rigid tangential shift of the plate in partial slip, since the last turn"),
-    _v("normal_iterations", "interface", "1", "normal solver iterations"),
-    _v("tangential_iterations", "interface", "1", "tangential solver CG iterations"),
-    _v("normal_residual", "interface", "1", "normal solver complementarity residual"),
-    _v("tangential_residual", "interface", "1", "Coulomb residual"),
-    _v("force_residual", "", "1", "|F_up - F_low| / F_N from the pressure fields"),
-    _v("tangential_force_residual", "", "1", "|T_up + T_low| / F_N from the traction fields"),
-    _v("moment_residual", "", "1",
-       "|F_N (r_up - r_low) + h T_up| / (F_N h) from the fields: tilting moment balance"),
-    _v("twist_moment", "", "N m",
-       "moment about z of the tractions of both plates about the centroid"),
-    _v("twist_ratio", "", "1", "|twist_moment| / (max(mu) F_N a), a the contact radius"),
-    _v("twist_angle", "", "degree",
-       "rotation of the particle about z relative to the plates since the last turn, from "
-       "balancing twist_moment (0 when it was below twist_tol)"),
-    _v("turn_evaluations", "", "1", "orientations evaluated in the step"),
-    _v("time_total", "", "s", "wall time of the step"),
-    _v("time_normal", "", "s", "wall time in normal solves"),
-    _v("time_tangential", "", "s", "wall time in tangential solves"),
-    _v("time_geometry", "", "s", "wall time computing the surfaces (vertical rays)"),
-)
-_NAMES = tuple(v.name for v in VARIABLES)
-_FLAGS = {"turned", "balanced"}
-_COUNTS = {"spots", "normal_iterations", "tangential_iterations", "turn_evaluations"}
-
-#: map variables: name -> (dimensions between interface and the map axes, units, long name)
-MAP_VARIABLES: dict[str, tuple[tuple[str, ...], str, str]] = {
-    "pressure": ((), "Pa", "contact pressure"),
-    "traction": (("component",), "Pa", "traction of the plate on the particle"),
-    "status": ((), "1", "0 open, 1 stick, 2 slip"),
-}
-
-#: coordinates of the record dimensions
-COORDS = {"interface": list(INTERFACES), "component": list(COMPONENTS),
-           "quaternion_component": ["x", "y", "z", "w"]}
+def _particle_names() -> set[str]:
+    """The per-particle variables a :class:`StepRecord` holds (not derived from the others;
+    ``load_share`` is the layer's to set)."""
+    return {v.name for v in schema.by_kind("particle")
+            if v.derive is None and v.name != "load_share"}
 
 
 class _Values:
-    """Attribute access to ``values``: ``record.plate_gap`` reads ``record.values["plate_gap"]``
-    (and pickling that does not recurse through it)."""
+    """Attribute access to ``values``: ``record.state`` reads ``record.values["state"]`` (and
+    pickling that does not recurse through it)."""
 
     def __getattr__(self, name: str) -> Any:
         values = self.__dict__.get("values")
@@ -138,47 +54,218 @@ class _Values:
 
 @dataclass
 class StepRecord(_Values):
-    """The per-step variables of :data:`VARIABLES` for one completed step.
+    """One particle's per-step variables (:mod:`thirdbody.schema`, kind "particle").
 
     ``values`` maps each name to a number or, for variables with dimensions, a tuple (interface
-    order upper, lower; components x, y). Attribute access reads ``values``: ``r.plate_gap``.
+    order upper, lower; components x, y). ``gap`` is the plate gap (m) the particle was solved
+    at (its own, within the load sharing's tolerance of the layer's). Attribute access reads
+    ``values``: ``r.state``.
     """
 
     step: int
     load_kind: str
     values: dict[str, Any] = field(default_factory=dict)
+    gap: float = math.nan
 
     def __post_init__(self) -> None:
-        missing = set(_NAMES) - set(self.values)
-        extra = set(self.values) - set(_NAMES)
+        names = _particle_names()
+        missing = names - set(self.values)
+        extra = set(self.values) - names - {v.name for v in schema.by_kind("particle")}
         if missing or extra:
-            raise ValueError(f"record fields do not match the table: missing {sorted(missing)}, "
-                             f"unknown {sorted(extra)}")
+            raise ValueError(f"record fields do not match the schema: missing "
+                             f"{sorted(missing)}, unknown {sorted(extra)}")
 
     def __str__(self) -> str:
-        """One line for progress output (``sim.run(progress=print)``): the step, F_N (N), the
-        state, the orientation and |F_T|/(μ_low F_N); the full record is ``repr``."""
+        """One line for progress output: the step, F_N (N), the state, the orientation and
+        |F_T|/(μ_low F_N); the full record is ``repr``."""
         return (f"step {self.step}: F_N {self.values['normal_force']:.4g} N, "
                 f"{self.values['state']}, {orientation_label(self)}, "
                 f"F_T/μF_N {self.values['ratio'][1]:.3f}")
 
 
-
 def orientation_label(record: StepRecord) -> str:
     """A short text for a record's orientation: "θ 20.00°" for a tilt about +y (the paper's
     angle), else "tilt 20.00° @ 30°" (angle and axis azimuth)."""
+    if isinstance(record, LayerRecord):
+        record = record.particles[0]
     x, y = record.values["orientation"]
     if abs(x) < 1e-9:
         return f"θ {y:.2f}°"
     return f"tilt {record.values['tilt']:.2f}° @ {record.values['tilt_azimuth']:.0f}°"
 
 
+# --- computing the values ----------------------------------------------------------------------
+def _pose(rotation) -> dict:
+    from .orientation import decompose
+
+    tilt = decompose(rotation)
+    return dict(quaternion=tuple(float(v) for v in rotation.as_quat()),
+                orientation=tilt.vector_deg, tilt=tilt.angle_deg,
+                tilt_azimuth=tilt.azimuth_deg, yaw=tilt.yaw_deg)
+
+
+def _turn(rotation, start_rotation) -> dict:
+    turn = (rotation * start_rotation.inv()).as_rotvec()
+    return dict(rotation=(math.degrees(turn[0]) + 0.0, math.degrees(turn[1]) + 0.0),
+                rotation_angle=math.degrees(float(np.linalg.norm(turn))))
+
+
+def particle_record(k: int, step, plates, ev0, ev, kind: RigidState, balanced: bool,
+                    start_rotation, tangential: dict, state, evaluations: int) -> StepRecord:
+    """A loaded particle's variables in step ``k`` (``step``: the load step), with the balances
+    recomputed from the fields.
+
+    ``ev0``, ``ev``: its normal equilibria at the step's start and end (:class:`Evaluation`);
+    ``kind``: what it did; ``tangential``: its tangential steps ("up", "low"); ``state``: its
+    :class:`~thirdbody.particle.member.ParticleState` after the step; ``evaluations``: the
+    orientations evaluated."""
+    mu = {"up": plates.mu_up, "low": plates.mu_low}
+    F, h = ev.force, ev.gap
+    t = {"up": tangential["up"], "low": tangential["low"]}
+    sols = {"up": ev.up, "low": ev.low}
+
+    def ratio(side: str, demand: float) -> float:
+        return demand / mu[side] if mu[side] > 0 else math.nan
+
+    force, first, twist = {}, {}, 0.0
+    for side, sol in sols.items():
+        X, Y = sol.contact.grid.mesh()
+        dA = sol.contact.grid.cell_area
+        p = sol.contact.pressure
+        force[side] = float(p.sum() * dA)
+        first[side] = np.array([(p * X).sum(), (p * Y).sum()]) * dA
+        tau = t[side].traction
+        twist += float((X * tau[1] - Y * tau[0]).sum() * dA)
+    T_up, T_low = t["up"].force, t["low"].force
+    offset = first["up"] / force["up"] - first["low"] / force["low"]
+    moment = F * offset + h * T_up
+    radius = math.sqrt(max(s.contact.area for s in sols.values()) / math.pi)
+    mu_max = max(mu.values())
+    sides = ("up", "low")
+    values = dict(
+        normal_force=F, **_pose(ev.rotation), **_turn(ev.rotation, start_rotation),
+        state=kind.value, turned=kind is not RigidState.STICK, balanced=balanced,
+        tangential_force=(float(ev.demand_force[0]), float(ev.demand_force[1])),
+        demand_ratio=tuple(ratio(s, ev0.demand) for s in sides),
+        ratio=tuple(ratio(s, ev.demand) for s in sides),
+        centroid=tuple(sols[s].centroid for s in sides),
+        approach=tuple(surface_approach(sols[s]) for s in sides),
+        contact_area=tuple(sols[s].contact.area for s in sides),
+        stick_area=tuple(t[s].stick_area for s in sides),
+        spots=tuple(sols[s].spots for s in sides),
+        position=tuple(state.position), centroid_height=-ev.low.plate,
+        slip=(tuple(state.slip_up), tuple(state.slip_low)),
+        shift=tuple(tuple(float(v) for v in t[s].shift) for s in sides),
+        normal_iterations=tuple(sols[s].contact.iterations for s in sides),
+        tangential_iterations=tuple(t[s].iterations for s in sides),
+        normal_residual=tuple(sols[s].contact.residual for s in sides),
+        tangential_residual=tuple(t[s].residual for s in sides),
+        force_residual=abs(force["up"] - force["low"]) / F,
+        tangential_force_residual=float(np.hypot(*(T_up + T_low))) / F,
+        moment_residual=float(np.hypot(*moment)) / (F * h),
+        twist_moment=twist,
+        twist_ratio=abs(twist) / (mu_max * F * radius) if mu_max > 0 else 0.0,
+        twist_angle=-math.degrees(t["up"].twist) + 0.0,
+        turn_evaluations=evaluations,
+        time_normal=0.0, time_tangential=0.0, time_geometry=0.0,
+    )
+    return StepRecord(k, step.kind, values, gap=h)
+
+
+def unloaded_record(k: int, step, gap: float, state, start_rotation, turned: bool,
+                    lowest: float) -> StepRecord:
+    """The record of a particle the plates do not press (shorter than the gap ``gap``, m): the
+    schema's blanks (no force, no contact, NaN where a quantity is undefined) and its pose.
+    ``turned``: it turned in the step before it lost its load (from ``start_rotation``);
+    ``lowest``: the height of its lowest point in the particle frame (m)."""
+    values = {name: schema.VARIABLES[name].blank() for name in _particle_names()}
+    values.update(**_pose(state.rotation), **_turn(state.rotation, start_rotation),
+                  turned=turned, position=tuple(state.position), centroid_height=-lowest,
+                  slip=(tuple(state.slip_up), tuple(state.slip_low)))
+    return StepRecord(k, step.kind, values, gap=gap)
+
+
+@dataclass
+class LayerRecord(_Values):
+    """One completed step: each particle's :class:`StepRecord` (layer order) and the step's
+    variables (:mod:`thirdbody.schema`, kind "step"). ``error`` is set when the step ended with
+    two particles touching. For a run of one particle, attribute access also reads the
+    particle's variables: ``r.state``, ``r.ratio``."""
+
+    step: int
+    load_kind: str
+    particles: list[StepRecord]
+    values: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+
+    def __getattr__(self, name: str) -> Any:
+        values = self.__dict__.get("values")
+        if values is not None and name in values:
+            return values[name]
+        particles = self.__dict__.get("particles")
+        if particles is not None and len(particles) == 1 and name in particles[0].values:
+            return particles[0].values[name]
+        raise AttributeError(name)
+
+    def __str__(self) -> str:
+        """One line for progress output: for one particle its line (:class:`StepRecord`);
+        else the step, the total F_N (N), how many particles are loaded and what fractions of
+        them stick, roll and rotate."""
+        if len(self.particles) == 1:
+            return str(self.particles[0])
+        v = self.values
+        return (f"step {self.step}: F_N {v['total_force']:.4g} N, {v['loaded']} loaded: "
+                f"{v['fraction_stick']:.0%} stick, {v['fraction_roll']:.0%} roll, "
+                f"{v['fraction_rotate']:.0%} rotate")
+
+    @classmethod
+    def from_particles(cls, k: int, step, gap: float, d0: float, records: list[StepRecord],
+                       layer, time_total: float, share_error: float = 0.0) -> LayerRecord:
+        """The step's variables from its particles' records (``gap``, ``d0``: m; the wall time
+        of the step, s; the largest share error accepted by the load sharing); sets each
+        particle's ``load_share`` and its derived variables."""
+        total = math.fsum(r.normal_force for r in records)
+        loaded = [r for r in records if r.state != "unloaded"]
+        n = max(len(loaded), 1)
+        terms = []                      # (F'_x, F'_y, M_x, M_y) of each loaded particle
+        for r, placed in zip(records, layer, strict=True):
+            if r.state == "unloaded":
+                continue
+            F, (fx, fy) = r.normal_force, r.tangential_force
+            px = placed.xy[0] + r.position[0] + r.centroid[0][0]
+            py = placed.xy[1] + r.position[1] + r.centroid[0][1]
+            terms.append((fx, fy, py * F - r.gap * fy, r.gap * fx - px * F))
+        fx, fy, mx, my = (math.fsum(t[c] for t in terms) for c in range(4))
+        for r in records:
+            r.values["load_share"] = r.normal_force / total if total > 0 else 0.0
+        values = dict(
+            load_value=step.value, load_kind=step.kind, total_force=total, plate_gap=gap,
+            compression=(d0 - gap) / d0, loaded=len(loaded),
+            fraction_stick=sum(r.state == "stick" for r in loaded) / n,
+            fraction_roll=sum(r.state in ("roll_upper", "roll_lower") for r in loaded) / n,
+            fraction_rotate=sum(r.state == "rotate" for r in loaded) / n,
+            plate_force=(float(fx), float(fy)), plate_moment=(float(mx), float(my)),
+            share_error=share_error, time_total=time_total)
+        for var in schema.VARIABLES.values():
+            if var.derive is None:
+                continue
+            if var.kind == "particle":
+                for r in records:
+                    r.values[var.name] = var.derive(r.values)
+            elif var.kind == "step":
+                values[var.name] = var.derive(values)
+        return cls(k, step.kind, records, values)
+
+
+# --- maps --------------------------------------------------------------------------------------
 @dataclass
 class StepMaps:
-    """Fields of one step around its contacts, per interface ("upper", "lower").
+    """Fields of one particle in one step around its contacts, per interface ("upper",
+    "lower").
 
-    ``windows[side]`` is (i0, j0, nx, ny) on the lattice of spacing Δ; ``pressure[side]`` and
-    ``status[side]`` are (ny, nx), ``traction[side]`` is (2, ny, nx).
+    ``windows[side]`` is (i0, j0, nx, ny) on the particle's lattice of spacing Δ (cell indices
+    from its centroid); ``pressure[side]`` and ``status[side]`` are (ny, nx), ``traction[side]``
+    is (2, ny, nx).
     """
 
     step: int
@@ -186,6 +273,25 @@ class StepMaps:
     pressure: dict[str, np.ndarray]
     traction: dict[str, np.ndarray]
     status: dict[str, np.ndarray]
+
+
+def step_maps(k: int, ev, tangential: dict) -> StepMaps:
+    """A loaded particle's fields at both plates in step ``k`` (``ev``: its normal equilibrium,
+    ``tangential``: its tangential steps "up", "low") on the bounding box of their contacts,
+    one free cell around."""
+    windows, pressure, traction, status = {}, {}, {}, {}
+    for side, sol, t in (("upper", ev.up, tangential["up"]), ("lower", ev.low, tangential["low"])):
+        c = sol.contact.contact
+        rows, cols = np.flatnonzero(c.any(axis=1)), np.flatnonzero(c.any(axis=0))
+        j0, j1 = max(rows[0] - 1, 0), min(rows[-1] + 2, c.shape[0])
+        i0, i1 = max(cols[0] - 1, 0), min(cols[-1] + 2, c.shape[1])
+        w = sol.window
+        windows[side] = (w.i0 + int(i0), w.j0 + int(j0), int(i1 - i0), int(j1 - j0))
+        pressure[side] = sol.contact.pressure[j0:j1, i0:i1].copy()
+        traction[side] = t.traction[:, j0:j1, i0:i1].copy()
+        status[side] = np.where(t.stick, 1, np.where(t.slip, 2, 0)).astype(np.int8)[j0:j1,
+                                                                                     i0:i1]
+    return StepMaps(k, windows, pressure, traction, status)
 
 
 def union_frames(frames) -> tuple[int, int, int, int]:
@@ -199,13 +305,9 @@ def union_frames(frames) -> tuple[int, int, int, int]:
     return i0, j0, i1 - i0, j1 - j0
 
 
-def _union(maps: list[StepMaps]) -> tuple[int, int, int, int]:
-    return union_frames(w for m in maps for w in m.windows.values())
-
-
 def has_maps(entry) -> bool:
-    """Whether a stored maps entry holds a map: a particle's :class:`StepMaps`, or a layer's
-    per-particle list of them (None for a particle without one)."""
+    """Whether a stored maps entry (a step's per-particle list of :class:`StepMaps`, None for a
+    particle without one) holds a map."""
     if isinstance(entry, list | tuple):
         return any(m is not None for m in entry)
     return entry is not None
@@ -218,42 +320,20 @@ def maps_step(entry) -> int:
     return entry.step
 
 
-@dataclass(frozen=True)
-class DatasetSpec:
-    """What turns a run's records and maps into its results dataset, besides themselves: a
-    particle's cell size, or a layer and its particles' cell sizes, and the run's inputs
-    (picklable: a process writing the results elsewhere builds the same dataset)."""
-
-    single: bool
-    cell_size: float
-    layer: Any
-    cell_sizes: list[float]
-    inputs: dict
-
-    def build(self, records: list, maps: list, status: str,
-              frame: tuple[int, int, int, int] | None = None, raw: bool = False):
-        """:func:`to_dataset` (a particle) or :func:`layer_dataset` (a layer)."""
-        if self.single:
-            return to_dataset(records, maps, self.cell_size, self.inputs, status, frame=frame,
-                              raw=raw)
-        return layer_dataset(records, maps, self.layer, self.cell_sizes, self.inputs, status,
-                             frame=frame, raw=raw)
-
-
 def map_frame(maps: list) -> tuple[int, int, int, int]:
-    """The cells (i0, j0, nx, ny) that hold every stored map window: of a particle's
-    :class:`StepMaps`, or of a layer's per-step lists of them (None where not stored)."""
+    """The cells (i0, j0, nx, ny) that hold every stored map window of the per-step lists of
+    :class:`StepMaps` (None where not stored)."""
     flat = [m for entry in maps for m in (entry if isinstance(entry, list | tuple) else [entry])
             if m is not None]
-    return _union(flat)
+    return union_frames(w for m in flat for w in m.windows.values())
 
 
-def _place(field: np.ndarray, window: tuple[int, int, int, int],
+def _place(values: np.ndarray, window: tuple[int, int, int, int],
            frame: tuple[int, int, int, int], fill: float = 0.0) -> np.ndarray:
     i0, j0, nx, ny = frame
-    out = np.full((*field.shape[:-2], ny, nx), fill, dtype=field.dtype)
+    out = np.full((*values.shape[:-2], ny, nx), fill, dtype=values.dtype)
     wi, wj, wnx, wny = window
-    out[..., wj - j0:wj - j0 + wny, wi - i0:wi - i0 + wnx] = field
+    out[..., wj - j0:wj - j0 + wny, wi - i0:wi - i0 + wnx] = values
     return out
 
 
@@ -272,12 +352,7 @@ def direction_sign(tangential_force: np.ndarray) -> np.ndarray:
     return np.where(sign == 0, 1.0, sign)
 
 
-_STEP_ATTRS = {"units": "1", "long_name": "load step index (from 0)"}
-_MAP_STEP_ATTRS = {"units": "1", "long_name": "load step index of the stored maps"}
-_LOAD_KIND_ATTRS = {"units": "1", "long_name": "load control: force (load_value in N) or "
-                                               "compression (load_value a ratio)"}
-
-
+# --- the dataset -------------------------------------------------------------------------------
 def _load_value_attrs(records) -> dict:
     """units and long_name of ``load_value``: N under force control, 1 under compression
     control (a load program is one or the other)."""
@@ -286,277 +361,146 @@ def _load_value_attrs(records) -> dict:
     return {"units": "N", "long_name": "prescribed normal force F_N"}
 
 
-def to_dataset(records: list[StepRecord], maps: list[StepMaps], cell_size: float,
-               inputs: dict, status: str, attrs: dict | None = None,
-               frame: tuple[int, int, int, int] | None = None, raw: bool = False):
-    """Assemble the results: per-step variables along ``step`` (and their own dimensions),
-    maps along ``map_step`` on the union of the stored contact windows (or on ``frame``, cells
-    (i0, j0, nx, ny), which must hold them: a results file being appended to uses a frame with
-    room to grow). With ``raw``, the variables as a dict name: (dims, values[, attrs]), without
-    building the Dataset (a results file appending a step needs only those)."""
-    import xarray as xr
-
-    steps = np.array([r.step for r in records], dtype=int)
-    data = {}
-    for var in VARIABLES:
-        values = [r.values[var.name] for r in records]
-        attrs_v = {"units": var.units, "long_name": var.long_name}
-        if var.name == "state":
-            arr = np.array([STATE_CODE[v] for v in values], dtype=np.int8)
-            attrs_v.update(flag_values=np.arange(len(STATES), dtype=np.int8),
-                           flag_meanings=" ".join(STATES))
-        else:
-            shape = (len(records), *[len(COORDS[d]) for d in var.dims])
-            dtype = np.int8 if var.name in _FLAGS else np.int64 if var.name in _COUNTS \
-                else float
-            arr = np.array(values, dtype=dtype).reshape(shape)
-        data[var.name] = (("step", *var.dims), arr, attrs_v)
-    data["load_kind"] = ("step", np.array([r.load_kind for r in records], dtype=str),
-                         _LOAD_KIND_ATTRS)
-    data["load_value"][2].update(_load_value_attrs(records))
-    coords: dict[str, Any] = {"step": ("step", steps, _STEP_ATTRS)}
-    used = {d for v in VARIABLES for d in v.dims}
-    if maps:
-        used |= {"interface", "component"}
-    for d in sorted(used):
-        coords[d] = (d, COORDS[d])
-    if maps:
-        frame = _union(maps) if frame is None else frame
-        i0, j0, nx, ny = frame
-        coords["map_step"] = ("map_step", np.array([m.step for m in maps], dtype=int),
-                              _MAP_STEP_ATTRS)
-        coords["map_x"] = ("map_x", (i0 + np.arange(nx)) * cell_size,
-                           {"units": "m", "long_name": "x of the cell centre (particle frame)"})
-        coords["map_y"] = ("map_y", (j0 + np.arange(ny)) * cell_size,
-                           {"units": "m", "long_name": "y of the cell centre (particle frame)"})
-        for name, (dims, units, long_name) in MAP_VARIABLES.items():
-            stacked = np.stack([np.stack([_place(getattr(m, name)[side], m.windows[side],
-                                                 frame) for side in INTERFACES])
-                                for m in maps])
-            data[name] = (("map_step", "interface", *dims, "map_y", "map_x"), stacked,
-                          {"units": units, "long_name": long_name})
-    if raw:
-        return {**data, **coords}
-    all_attrs = {
-        "title": "thirdbody: deformable particle between two plates",
-        "thirdbody_version": __version__,
-        "inputs": json.dumps(inputs),
-        "status": status,
-        "conventions": "SI units; x, y horizontal, z up, particle frame (centroid at the "
-                       "origin); orientation as a tilt vector in degrees (the paper's theta "
-                       "about +y is its y component); tractions are exerted by the plate on "
-                       "the particle; interface order upper, lower",
-    }
-    all_attrs.update(attrs or {})
-    return xr.Dataset(data, coords=coords, attrs=all_attrs)
+def _events(records: list[LayerRecord]) -> dict[str, list]:
+    """The event table of the records (:func:`_events_from_arrays`)."""
+    return _events_from_arrays(
+        [r.step for r in records], [[p.state for p in r.particles] for r in records],
+        [[p.turned for p in r.particles] for r in records],
+        [[p.normal_force for p in r.particles] for r in records],
+        [[p.rotation_angle for p in r.particles] for r in records])
 
 
-# --- layers ------------------------------------------------------------------------------------
-#: per-step variables of a layer (along ``step`` only)
-LAYER_VARIABLES: tuple[Variable, ...] = (
-    _v("load_value", "", "N", "prescribed load: F_N (N) or compression ratio (1), see load_kind"),
-    _v("total_force", "", "N", "total normal force F_N on each plate"),
-    _v("plate_gap", "", "m", "plate separation h (force-weighted mean over the loaded "
-                             "particles)"),
-    _v("compression", "", "1", "compression ratio (d0 - h) / d0, d0 the tallest particle's "
-                               "height"),
-    _v("loaded", "", "1", "number of particles the plates press"),
-    _v("fraction_stick", "", "1", "fraction of the loaded particles that stuck"),
-    _v("fraction_roll", "", "1", "fraction of the loaded particles that rolled (about either "
-                                 "plate)"),
-    _v("fraction_rotate", "", "1", "fraction of the loaded particles that rotated about their "
-                                   "centroid"),
-    _v("plate_force", "component", "N",
-       "net tangential force of the particles on the upper plate (minus that on the lower)"),
-    _v("plate_moment", "component", "N m",
-       "tilting moment of the particles' forces on the upper plate, about the origin on the "
-       "lower plate"),
-    _v("share_error", "", "1", "largest error of a particle's share of F_N accepted by the "
-                               "load sharing in the step (converged: <= 1e-7)"),
-    _v("time_total", "", "s", "wall time of the step"),
-)
-#: record variables that belong to the layer, not to a particle
-_LAYER_ONLY = {"load_value", "plate_gap", "compression", "time_total"}
-
-
-@dataclass
-class LayerRecord(_Values):
-    """One completed step of a layer: the per-particle :class:`StepRecord` objects (layer
-    order) and the layer's variables (:data:`LAYER_VARIABLES`). ``error`` is set when the step
-    ended with two particles touching."""
-
-    step: int
-    load_kind: str
-    particles: list[StepRecord]
-    values: dict[str, Any] = field(default_factory=dict)
-    error: str | None = None
-
-    def __str__(self) -> str:
-        """One line for progress output: the step, the total F_N (N), how many particles are
-        loaded and what fractions of them stick, roll and rotate."""
-        v = self.values
-        return (f"step {self.step}: F_N {v['total_force']:.4g} N, {v['loaded']} loaded: "
-                f"{v['fraction_stick']:.0%} stick, {v['fraction_roll']:.0%} roll, "
-                f"{v['fraction_rotate']:.0%} rotate")
-
-
-    @classmethod
-    def from_particles(cls, k: int, step, gap: float, d0: float, records: list[StepRecord],
-                       layer, time_total: float, share_error: float = 0.0) -> LayerRecord:
-        """The layer's variables from its particles' records (``gap``, ``d0``: m; the wall
-        time of the step, s; the largest share error accepted by the load sharing)."""
-        total = math.fsum(r.normal_force for r in records)
-        loaded = [r for r in records if r.state != "unloaded"]
-        n = max(len(loaded), 1)
-        terms = []                      # (F'_x, F'_y, M_x, M_y) of each loaded particle
-        for r, placed in zip(records, layer, strict=True):
-            if r.state == "unloaded":
-                continue
-            F, (fx, fy) = r.normal_force, r.tangential_force
-            px = placed.xy[0] + r.position[0] + r.centroid[0][0]
-            py = placed.xy[1] + r.position[1] + r.centroid[0][1]
-            terms.append((fx, fy, py * F - r.plate_gap * fy, r.plate_gap * fx - px * F))
-        fx, fy, mx, my = (math.fsum(t[c] for t in terms) for c in range(4))
-        force, moment = (fx, fy), (mx, my)
-        values = dict(
-            load_value=step.value, total_force=total, plate_gap=gap,
-            compression=(d0 - gap) / d0, loaded=len(loaded),
-            fraction_stick=sum(r.state == "stick" for r in loaded) / n,
-            fraction_roll=sum(r.state in ("roll_upper", "roll_lower") for r in loaded) / n,
-            fraction_rotate=sum(r.state == "rotate" for r in loaded) / n,
-            plate_force=tuple(float(v) for v in force),
-            plate_moment=tuple(float(v) for v in moment), share_error=share_error,
-            time_total=time_total)
-        return cls(k, step.kind, records, values)
-
-
-def _array(var: Variable, values: list, lead: tuple[int, ...]) -> tuple[np.ndarray, dict]:
-    attrs_v = {"units": var.units, "long_name": var.long_name}
-    if var.name == "state":
-        arr = np.array([STATE_CODE[v] for v in values], dtype=np.int8).reshape(lead)
-        attrs_v.update(flag_values=np.arange(len(STATES), dtype=np.int8),
-                       flag_meanings=" ".join(STATES))
-        return arr, attrs_v
-    shape = (*lead, *[len(COORDS[d]) for d in var.dims])
-    dtype = np.int8 if var.name in _FLAGS else np.int64 if var.name in _COUNTS | {"loaded"} \
-        else float
-    return np.array(values, dtype=dtype).reshape(shape), attrs_v
-
-
-#: what the events table records
-EVENTS = ("loaded", "unloaded", "roll_upper", "roll_lower", "rotate", "rolled_off")
-
-
-def _events(records: list[LayerRecord]) -> list[tuple[str, np.ndarray, dict]]:
-    """The events table, one row per event, in step then particle order: a particle is loaded
+def _events_from_arrays(steps, states, turned, normal_force, rotation_angle) -> dict[str, list]:
+    """The event table, one row per event, in step then particle order: a particle is loaded
     or unloaded (compared with the step before; at step 0 every loaded particle is), or turns
     (the state in which it turned, with the angle; ``rolled_off`` if it turned until it lost
-    its load)."""
+    its load). Arguments per step (and particle): step index, state names, turned, normal
+    force (N), angle turned (degree)."""
     rows = []
     previous = None
-    for r in records:
-        for i, p in enumerate(r.particles):
-            loaded = p.state != "unloaded"
+    for k, step in enumerate(steps):
+        for i, state in enumerate(states[k]):
+            loaded = state != "unloaded"
             was = previous[i] if previous is not None else False
             if loaded != was:
-                rows.append((r.step, i, "loaded" if loaded else "unloaded", p.normal_force))
-            if p.turned:
-                rows.append((r.step, i, p.state if loaded else "rolled_off", p.rotation_angle))
-        previous = [p.state != "unloaded" for p in r.particles]
-    return [
-        ("event_step", np.array([row[0] for row in rows], dtype=np.int64),
-         {"long_name": "load step of the event"}),
-        ("event_particle", np.array([row[1] for row in rows], dtype=np.int64),
-         {"long_name": "particle of the event"}),
-        ("event_kind", np.array([row[2] for row in rows], dtype=str),
-         {"long_name": "one of " + ", ".join(EVENTS)}),
-        ("event_value", np.array([row[3] for row in rows], dtype=float),
-         {"units": "N or degree", "long_name": "the normal force when loaded or unloaded "
-                                                "(N); the angle turned (degree)"}),
-    ]
+                rows.append((int(step), i, "loaded" if loaded else "unloaded",
+                             float(normal_force[k][i])))
+            if turned[k][i]:
+                rows.append((int(step), i, state if loaded else "rolled_off",
+                             float(rotation_angle[k][i])))
+        previous = [s != "unloaded" for s in states[k]]
+    names = ("event_step", "event_particle", "event_kind", "event_value")
+    return {name: [row[c] for row in rows] for c, name in enumerate(names)}
 
 
-def layer_dataset(records: list[LayerRecord], maps: list[list[StepMaps | None]], layer,
-                  cell_sizes: list[float], inputs: dict, status: str,
-                  attrs: dict | None = None, frame: tuple[int, int, int, int] | None = None,
-                  raw: bool = False):
-    """Assemble a layer's results: layer variables along ``step``, per-particle variables along
-    (``step``, ``particle``), maps along (``map_step``, ``particle``) on a lattice of each
-    particle's own cells (``map_i``, ``map_j``: cell indices from its centroid; x = ``x0`` +
-    ``position`` + ``map_i`` · ``cell_size``; the union of the stored windows, or ``frame``
-    as in :func:`to_dataset`; ``raw`` as there)."""
-    import xarray as xr
+@dataclass(frozen=True)
+class DatasetSpec:
+    """What turns a run's records and maps into its results dataset, besides themselves: the
+    layer, its particles' cell sizes (m) and the run's inputs (picklable: a process writing
+    the results elsewhere builds the same dataset)."""
 
-    n = len(layer)
-    steps = np.array([r.step for r in records], dtype=int)
-    data: dict[str, Any] = {}
-    for var in LAYER_VARIABLES:
-        arr, a = _array(var, [r.values[var.name] for r in records], (len(records),))
-        data[var.name] = (("step", *var.dims), arr, a)
-    for var in VARIABLES:
-        if var.name in _LAYER_ONLY:
-            continue
-        values = [p.values[var.name] for r in records for p in r.particles]
-        arr, a = _array(var, values, (len(records), n))
-        data[var.name] = (("step", "particle", *var.dims), arr, a)
-    F = np.array([[p.normal_force for p in r.particles] for r in records]).reshape(-1, n)
-    totals = np.array([[r.values["total_force"]] for r in records]).reshape(-1, 1)
-    data["load_share"] = (("step", "particle"),
-                          np.divide(F, totals, out=np.zeros_like(F), where=totals > 0),
-                          {"units": "1", "long_name": "the particle's share of F_N"})
-    data["load_kind"] = ("step", np.array([r.load_kind for r in records], dtype=str),
-                         _LOAD_KIND_ATTRS)
-    data["load_value"][2].update(_load_value_attrs(records))
-    for name, values, attrs_e in _events(records):
-        data[name] = ("event", values, attrs_e)
-    pos = layer.positions
-    data["x0"] = ("particle", pos[:, 0], {"units": "m", "long_name": "initial centroid x"})
-    data["y0"] = ("particle", pos[:, 1], {"units": "m", "long_name": "initial centroid y"})
-    data["size"] = ("particle", np.array([p.particle.shape.size for p in layer]),
-                    {"units": "m", "long_name": "particle size: largest centroid-to-surface "
-                                                "distance"})
-    data["cell_size"] = ("particle", np.array(cell_sizes, dtype=float),
-                         {"units": "m", "long_name": "the particle's BEM cell size"})
-    data["shape"] = ("particle", np.array([repr(p.particle.shape) for p in layer], dtype=str),
-                     {"long_name": "shape"})
-    coords: dict[str, Any] = {
-        "step": ("step", steps, _STEP_ATTRS),
-        "particle": ("particle", np.arange(n), {"long_name": "particle index (layer order)"}),
-    }
-    for d in ("interface", "component", "quaternion_component"):
-        coords[d] = (d, COORDS[d])
-    stored = [(maps_step(m_list), m_list) for m_list in maps if has_maps(m_list)]
-    if stored:
-        i0, j0, nx, ny = map_frame(maps) if frame is None else frame
+    layer: Any
+    cell_sizes: list[float]
+    inputs: dict
+
+    def build(self, records: list[LayerRecord], maps: list, status: str,
+              frame: tuple[int, int, int, int] | None = None, raw: bool = False,
+              attrs: dict | None = None):
+        """The results: the step's variables along ``step``, each particle's along (``step``,
+        ``particle``), maps along (``map_step``, ``particle``) on each particle's lattice
+        (``map_i``, ``map_j``: cell indices from its centroid; ``map_x``, ``map_y``: the cell
+        centres in m, particle frame), on the union of the stored windows or on ``frame``
+        (cells (i0, j0, nx, ny), which must hold them: a results file being appended to uses a
+        frame with room to grow). With ``raw``, the variables as a dict name: (dims, values,
+        attrs), without building the Dataset (a results file appending a step needs only
+        those)."""
+        import xarray as xr
+
+        layer, n = self.layer, len(self.layer)
+        lead = {"step": (len(records),), "particle": (len(records), n)}
+        data: dict[str, Any] = {}
+        for var in schema.VARIABLES.values():
+            if var.kind == "step":
+                values = [r.values[var.name] for r in records]
+            elif var.kind == "particle":
+                values = [p.values[var.name] for r in records for p in r.particles]
+            else:
+                continue
+            data[var.name] = (var.dims, var.array(values, lead[var.kind]), var.attrs)
+        data["load_value"][2].update(_load_value_attrs(records))
+        for name, values in _events(records).items():
+            var = schema.VARIABLES[name]
+            data[name] = (var.dims, var.array(values, (len(values),)), var.attrs)
+        static = {"x0": layer.positions[:, 0], "y0": layer.positions[:, 1],
+                  "size": [p.particle.shape.size for p in layer],
+                  "cell_size": self.cell_sizes,
+                  "shape": [repr(p.particle.shape) for p in layer]}
+        for name, values in static.items():
+            var = schema.VARIABLES[name]
+            data[name] = (var.dims, var.array(list(values), (n,)), var.attrs)
+        coords: dict[str, Any] = {
+            "step": ("step", np.array([r.step for r in records], dtype=int),
+                     _dim_attrs("step")),
+            "particle": ("particle", np.arange(n), _dim_attrs("particle")),
+        }
+        for d in ("interface", "component", "quaternion_component"):
+            coords[d] = (d, list(schema.DIMENSIONS[d].labels), _dim_attrs(d))
+        stored = [(maps_step(m_list), m_list) for m_list in maps if has_maps(m_list)]
+        if stored:
+            self._maps(stored, map_frame(maps) if frame is None else frame, data, coords)
+        if raw:
+            return {**data, **coords}
+        all_attrs = {
+            "title": "thirdbody: deformable particles between two plates",
+            "thirdbody_version": __version__,
+            "thirdbody_format": schema.FORMAT_VERSION,
+            "inputs": json.dumps(self.inputs),
+            "status": status,
+            "conventions": "SI units; x, y horizontal, z up; per-particle vectors in the "
+                           "particle's frame (centroid at the origin) unless stated; orientation "
+                           "as a tilt vector in degrees (the paper's theta about +y is its y "
+                           "component); tractions are exerted by the plate on the particle; "
+                           "interface order upper, lower; unloaded particles have state "
+                           "'unloaded' and NaN where a quantity is undefined",
+        }
+        all_attrs.update(attrs or {})
+        return xr.Dataset(data, coords=coords, attrs=all_attrs)
+
+    def _maps(self, stored: list, frame: tuple[int, int, int, int], data: dict,
+              coords: dict) -> None:
+        i0, j0, nx, ny = frame
+        cells = np.asarray(self.cell_sizes, dtype=float)
         coords["map_step"] = ("map_step", np.array([s for s, _ in stored], dtype=int),
-                              _MAP_STEP_ATTRS)
-        coords["map_i"] = ("map_i", i0 + np.arange(nx),
-                           {"long_name": "cell index along x from the particle's centroid"})
-        coords["map_j"] = ("map_j", j0 + np.arange(ny),
-                           {"long_name": "cell index along y from the particle's centroid"})
-        for name, (dims, units, long_name) in MAP_VARIABLES.items():
-            blank = np.zeros((len(INTERFACES), *([2] if dims else []), ny, nx),
-                             dtype=np.int8 if name == "status" else float)
+                              _dim_attrs("map_step"))
+        coords["map_i"] = ("map_i", i0 + np.arange(nx), _dim_attrs("map_i"))
+        coords["map_j"] = ("map_j", j0 + np.arange(ny), _dim_attrs("map_j"))
+        coords["map_x"] = (("particle", "map_i"), cells[:, None] * (i0 + np.arange(nx)),
+                           {"units": "m", "long_name": "x of the cell centre (particle frame)"})
+        coords["map_y"] = (("particle", "map_j"), cells[:, None] * (j0 + np.arange(ny)),
+                           {"units": "m", "long_name": "y of the cell centre (particle frame)"})
+        for name in ("pressure", "traction", "status"):
+            var = schema.VARIABLES[name]
+            blank = np.full((len(INTERFACES), *([2] if "component" in var.dims else []), ny, nx),
+                            var.fill, dtype=var.dtype)
             stacked = np.stack([
                 np.stack([blank if m is None else
-                          np.stack([_place(getattr(m, name)[side], m.windows[side],
-                                           (i0, j0, nx, ny)) for side in INTERFACES])
+                          np.stack([_place(getattr(m, name)[side], m.windows[side], frame)
+                                    for side in INTERFACES])
                           for m in m_list])
                 for _, m_list in stored])
-            data[name] = (("map_step", "particle", "interface", *dims, "map_j", "map_i"),
-                          stacked, {"units": units, "long_name": long_name})
-    if raw:
-        return {**data, **coords}
-    all_attrs = {
-        "title": "thirdbody: a layer of deformable particles between two plates",
-        "thirdbody_version": __version__,
-        "inputs": json.dumps(inputs),
-        "status": status,
-        "conventions": "SI units; x, y horizontal, z up; per-particle vectors in the particle's "
-                       "frame (centroid at the origin) unless stated; orientation as a tilt "
-                       "vector in degrees; tractions are exerted by the plate on the particle; "
-                       "interface order upper, lower; unloaded particles have state 'unloaded' "
-                       "and NaN where a quantity is undefined",
-    }
-    all_attrs.update(attrs or {})
-    return xr.Dataset(data, coords=coords, attrs=all_attrs)
+            data[name] = (var.dims, stacked, var.attrs)
+
+
+def _dim_attrs(name: str) -> dict:
+    d = schema.DIMENSIONS[name]
+    return {"long_name": d.long_name, **({"units": d.units} if d.units else {})}
+
+
+def particle_view(ds, particle: int = 0):
+    """One particle's results without the ``particle`` dimension (what the one-particle figures
+    read): the step's and the particle's variables, its maps on the metre coordinates
+    ``map_x``, ``map_y`` (particle frame) as their dimensions, and its static variables."""
+    view = ds.isel(particle=particle)
+    if "map_i" in view.dims:
+        view = view.swap_dims({"map_i": "map_x", "map_j": "map_y"})
+    return view

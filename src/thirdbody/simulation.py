@@ -41,11 +41,21 @@ from .checkpoint import restore, snapshot
 from .layer import Layer, first_overlap
 from .loading import LoadProgram, LoadStep
 from .orientation import key
-from .particle.member import Compliance, Member, ParticleState, step_maps
+from .particle.member import Compliance, Member, ParticleState
 from .particle.model import Particle, Plates
 from .particle.statics import Evaluation, StaticsError
 from .particle.turning import find_stable_orientation, turn_kinematics
-from .records import STATES, DatasetSpec, LayerRecord, StepMaps, StepRecord, has_maps
+from .records import (
+    STATES,
+    DatasetSpec,
+    LayerRecord,
+    StepMaps,
+    StepRecord,
+    has_maps,
+    particle_record,
+    step_maps,
+    unloaded_record,
+)
 from .rigid import RigidState, classify
 
 __all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError",
@@ -228,6 +238,7 @@ class Simulation:
             "shape": repr(particle.shape),
             "E": mat.E, "nu": mat.nu, "orientation_deg": particle.orientation_deg,
             "tilt_axis_deg": particle.tilt_axis_deg, "yaw_deg": particle.yaw_deg,
+            **({"azimuth_deg": particle.azimuth_deg} if particle.azimuth_deg else {}),
             "quaternion": [float(v) for v in particle.orientation.as_quat()],
         }
 
@@ -409,7 +420,8 @@ class Simulation:
 
     def step(self, k: int, state: LayerState):
         """Run load step ``k`` from ``state`` (updated in place). Returns (record, maps or
-        None): a :class:`StepRecord` for a single particle, a :class:`LayerRecord` for a layer.
+        None): a :class:`LayerRecord` (for a single particle too) and the step's per-particle
+        list of :class:`StepMaps` (None for a particle not loaded).
         Raises on failure; a step that ends with two particles touching returns its record
         with ``error`` set (the run then stops)."""
         step = self.schedule[k]
@@ -460,11 +472,11 @@ class Simulation:
         records = []
         for i, (m, ev, s) in enumerate(zip(self.members, evs, state.particles, strict=True)):
             if ev is None:
-                r = m.unloaded_record(k, step, self.d0, gap, s, starts[i],
-                                      kinds[i] is not RigidState.STICK)
+                r = unloaded_record(k, step, gap, s, starts[i], kinds[i] is not RigidState.STICK,
+                                    m.lowest(s.rotation))
             else:
-                r = m.record(k, step, self.d0, first[i] or ev, ev, kinds[i], balanced[i],
-                             starts[i], tangential[i], s, counts[i])
+                r = particle_record(k, step, self.plates, first[i] or ev, ev, kinds[i],
+                                    balanced[i], starts[i], tangential[i], s, counts[i])
             normal0, geometry0 = clock0[i]
             r.values.update(time_normal=m.statics.normal_time - normal0,
                             time_geometry=m.statics.geometry_time - geometry0,
@@ -475,12 +487,10 @@ class Simulation:
                                          or k == len(self.schedule) - 1)
         maps = [step_maps(k, ev, t) if want_maps and ev is not None else None
                 for ev, t in zip(evs, tangential, strict=True)]
-        if self.single:
-            records[0].values["time_total"] = total
-            return records[0], maps[0] if want_maps else None
         record = LayerRecord.from_particles(k, step, gap, self.d0, records, self.layer, total,
                                             self._share_error)
-        record.error = self._clearance(state, evs)
+        if n > 1:
+            record.error = self._clearance(state, evs)
         return record, (maps if want_maps else None)
 
     def _rebalance(self, step: LoadStep, state: LayerState, evs, candidates: set[int],
@@ -620,7 +630,7 @@ class Simulation:
         try:
             for record, maps, current in self.steps(state, start):
                 self.records.append(record)
-                if has_maps(maps):          # not a layer's step with no particle loaded
+                if has_maps(maps):          # not a step with no particle loaded
                     self.maps.append(maps)
                 if progress is not None:
                     progress(record)
@@ -653,8 +663,7 @@ class Simulation:
 
     def dataset_spec(self) -> DatasetSpec:
         """What :meth:`dataset` needs besides the records and maps (picklable)."""
-        return DatasetSpec(self.single, self.cell_size, self.layer,
-                           [m.cell_size for m in self.members], self.inputs())
+        return DatasetSpec(self.layer, [m.cell_size for m in self.members], self.inputs())
 
 
 @dataclass(frozen=True)

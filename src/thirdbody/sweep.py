@@ -53,13 +53,15 @@ from typing import Any
 
 import numpy as np
 
+from . import schema
 from .io.config import Config, ConfigError, parse_config
-from .io.results import RESUME_VARIABLE, run_to_file, write_results
-from .records import COORDS as _RECORD_COORDS
-from .records import LAYER_VARIABLES, VARIABLES, direction_sign
+from .io.results import RESUME_VARIABLE, open_results, run_to_file, write_results
+from .records import direction_sign
+from .schema import BEHAVIOURS, STATES
 
 __all__ = [
     "BEHAVIOURS",
+    "STATES",
     "Axis",
     "Case",
     "Sweep",
@@ -71,26 +73,11 @@ __all__ = [
     "summarize",
 ]
 
-#: Behaviour of a case over its whole run (``behaviour`` in the summary): ``stick`` if it never
-#: turned, else the state of its first turning step; ``failed`` if a step failed, ``error`` if
-#: the case raised, ``missing`` if it has no result.
-BEHAVIOURS = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "error", "missing")
+#: Behaviour of a case over its whole run (``behaviour`` in the summary): ``stick`` if no
+#: particle turned, else the state in which the first particle to turn did; ``failed`` if a step
+#: failed, ``error`` if the case raised, ``missing`` if it has no result (the codes of
+#: :data:`thirdbody.schema.BEHAVIOURS`).
 _BEHAVIOUR_CODE = {name: i for i, name in enumerate(BEHAVIOURS)}
-
-#: Per-step variables copied into the summary (when every case has the same step count).
-STEP_VARIABLES = ("normal_force", "compression", "orientation", "state", "ratio", "position")
-
-#: Units of the configuration keys one is likely to sweep (coordinate attributes).
-_KEY_UNITS = {
-    "plates.mu": "1", "plates.mu_up": "1", "plates.mu_low": "1",
-    "particle.orientation_deg": "degree", "particle.tilt_axis_deg": "degree",
-    "particle.yaw_deg": "degree", "particle.E": "Pa", "particle.nu": "1",
-    "particle.radius": "m", "particle.semi_axes": "m", "particle.amplitude": "1",
-    "particle.seed": "1", "particle.n_waves": "1", "load.stop": "N", "load.hold": "N",
-    "numerics.resolution": "cells per particle size",
-    "layer.size": "m", "layer.size_std": "m", "layer.count": "1", "layer.area_fraction": "1",
-    "layer.max_tilt_deg": "degree", "layer.seed": "1", "layer.E": "Pa", "layer.nu": "1",
-}
 
 
 class SweepError(ValueError):
@@ -107,7 +94,7 @@ class Axis:
 
     @property
     def units(self) -> str:
-        return _KEY_UNITS.get(self.key, "")
+        return schema.parameter_units(self.key)
 
 
 @dataclass(frozen=True)
@@ -200,10 +187,20 @@ class Sweep:
         return "\n".join(lines) + "\n"
 
 
+#: particle keys added to the configuration after the case hash was defined (None when unset)
+_LATER_KEYS = ("azimuth_deg",)
+
+
 def case_id(config: Config) -> str:
     """16 hex digits of the SHA-256 of the resolved configuration (canonical JSON), with the
     content of its mesh files: an edited mesh is a new case."""
     data = config.model_dump(mode="json", exclude={"base_dir"})
+    # keys added since case ids were defined are left out when unset: earlier sweeps keep
+    # their ids (and their finished cases)
+    for table in [data.get("particle")] + list(data.get("particles") or []):
+        for key in _LATER_KEYS:
+            if table is not None and table.get(key) is None:
+                table.pop(key, None)
     digests = config.mesh_digests()
     if digests:
         data["mesh_sha256"] = digests
@@ -488,15 +485,24 @@ def _read_case(path: Path, names: Iterable[str]) -> _CaseData | None:
         return None
     try:
         with h5py.File(path, "r") as f:
+            old = int(np.ravel(f.attrs.get("thirdbody_format", 1))[0]) < schema.FORMAT_VERSION
             arrays, attrs = {}, {}
-            for name in names:
+            for name in () if old else names:
                 if name in f:
                     arrays[name] = f[name][()]
                     attrs[name] = {k: _text(v) for k, v in f[name].attrs.items()
                                    if k in _KEPT_ATTRS}
-            return _CaseData(_text(f.attrs.get("status", "complete")), RESUME_VARIABLE in f,
+            case = _CaseData(_text(f.attrs.get("status", "complete")), RESUME_VARIABLE in f,
                              _text(f.attrs.get("inputs", "")),
                              _text(f.attrs.get("thirdbody_version", "")), arrays, attrs)
+        if old and not case.partial:        # an earlier format: read in today's form
+            ds = open_results(path)
+            for name in names:
+                if name in ds:
+                    case.arrays[name] = ds[name].values
+                    case.attrs[name] = {k: v for k, v in ds[name].attrs.items()
+                                        if k in _KEPT_ATTRS}
+        return case
     except OSError as exc:
         raise UnreadableCase(f"{path}: {exc}") from None
 
@@ -562,7 +568,7 @@ def run_sweep(sweep: Sweep, out: str | Path, *, client=None, scheduler: str | No
     for case in cases:
         path = cases_dir / case.filename
         try:
-            found = _read_case(path, _SUMMARY_NAMES)
+            found = _read_case(path, _summary_names())
         except UnreadableCase:
             set_aside.append((path, _set_aside(path)))
             found = None
@@ -710,26 +716,30 @@ def _run_tasks(client, todo: list[Case], cases_dir: Path, records: dict, total: 
 
 
 # --- the summary -----------------------------------------------------------------------------
-_SUMMARY_INPUTS = ("turned", "state", "quaternion", "ratio", "compression", "normal_force",
-                   "time_total", "tangential_force")
-#: per-step layer variables copied into the summary of a sweep over layers
-LAYER_STEP_VARIABLES = ("total_force", "compression", "loaded", "fraction_stick",
-                        "fraction_roll", "fraction_rotate")
-_SUMMARY_NAMES = tuple(dict.fromkeys((*_SUMMARY_INPUTS, *STEP_VARIABLES,
-                                      *LAYER_STEP_VARIABLES)))
+#: what a case's scalar summary reads, besides the variables whose steps the summary keeps
+_SUMMARY_INPUTS = ("turned", "state", "quaternion", "ratio", "compression", "total_force",
+                   "time_total", "tangential_force", "loaded", "fraction_stick",
+                   "fraction_roll", "fraction_rotate")
+
+
+def _summary_names() -> tuple[str, ...]:
+    """The variables a case file is read for: the scalar summary's inputs and every variable
+    whose per-step values the summary keeps (:attr:`thirdbody.schema.Variable.summary`)."""
+    kept = (v.name for v in schema.VARIABLES.values() if v.summary)
+    return tuple(dict.fromkeys((*_SUMMARY_INPUTS, *kept)))
 
 
 def _total_rotation(case: _CaseData) -> tuple[float, float]:
-    """The angle (degrees) from the initial to the final orientation, signed by the side of
-    +y its axis points to (for the paper's turns about y: the change of θ), and the azimuth
-    of its axis (degrees from +x)."""
+    """The angle (degrees) from the initial to the final orientation of a case's one particle,
+    signed by the side of +y its axis points to (for the paper's turns about y: the change of
+    θ), and the azimuth of its axis (degrees from +x)."""
     from scipy.spatial.transform import Rotation
 
     try:
         start = Rotation.from_quat(json.loads(case.inputs)["quaternion"])
     except (ValueError, KeyError, TypeError):
         return math.nan, math.nan
-    vector = np.degrees((Rotation.from_quat(case.arrays["quaternion"][-1]) * start.inv())
+    vector = np.degrees((Rotation.from_quat(case.arrays["quaternion"][-1, 0]) * start.inv())
                         .as_rotvec())
     angle = float(np.linalg.norm(vector))
     if angle == 0:
@@ -738,57 +748,18 @@ def _total_rotation(case: _CaseData) -> tuple[float, float]:
     return sign * angle, math.degrees(math.atan2(vector[1], vector[0]))
 
 
-def _is_layer(case: _CaseData) -> bool:
-    return "total_force" in case.arrays
-
-
 def _case_summary(case: _CaseData) -> dict:
-    """Scalar summaries of one case's per-step results."""
-    from .simulation import STATES
-
-    nan = math.nan
+    """Scalar summaries of one case's per-step results: the first step in which a particle
+    turned, the final compression, loaded count and state fractions; the behaviour is the
+    state in which the first particle to turn did (``stick`` if none did); for a case of one
+    particle also its total rotation, final state and signed final ratios."""
     a = case.arrays
+    out: dict[str, Any] = {v.name: v.fill if isinstance(v.fill, int | float) else math.nan
+                           for v in schema.by_kind("summary")}
     n = len(a.get("state", ()))
-    out = {"steps_done": n, "total_rotation": nan, "turn_azimuth": nan, "first_turn_force": nan,
-           "first_turn_compression": nan, "turning_steps": 0, "final_state": -1,
-           "final_ratio_up": nan, "final_ratio_low": nan, "final_compression": nan,
-           "behaviour": _BEHAVIOUR_CODE["failed"], "compute_time": 0.0,
-           "final_loaded": nan, "final_fraction_stick": nan, "final_fraction_roll": nan,
-           "final_fraction_rotate": nan}
+    out.update(steps_done=n, behaviour=_BEHAVIOUR_CODE["failed"], compute_time=0.0)
     if n == 0:
         return out
-    if _is_layer(case):
-        return _layer_case_summary(case, out)
-    turned = np.flatnonzero(a["turned"].astype(bool))
-    state = a["state"]
-    # a case that never turned did not rotate: exactly 0, not the round-off of q q0⁻¹
-    total, azimuth = _total_rotation(case) if turned.size else (0.0, nan)
-    sign = 1.0
-    if "tangential_force" in a:
-        sign = float(direction_sign(a["tangential_force"])[-1])
-    out.update(total_rotation=total, turn_azimuth=azimuth,
-               turning_steps=int(turned.size), final_state=int(state[-1]),
-               final_ratio_up=sign * float(a["ratio"][-1][0]),
-               final_ratio_low=sign * float(a["ratio"][-1][1]),
-               final_compression=float(a["compression"][-1]),
-               compute_time=float(np.sum(a["time_total"])))
-    if turned.size:
-        k = turned[0]
-        out.update(first_turn_force=float(a["normal_force"][k]),
-                   first_turn_compression=float(a["compression"][k]))
-    if case.status == "complete" and not case.partial:
-        first = STATES[int(state[turned[0]])] if turned.size else "stick"
-        out["behaviour"] = _BEHAVIOUR_CODE.get(first, _BEHAVIOUR_CODE["failed"])
-    return out
-
-
-def _layer_case_summary(case: _CaseData, out: dict) -> dict:
-    """Scalar summaries of a layer case: the first step in which any particle turned, the
-    final loaded count and state fractions; the behaviour is that of the first particle to
-    turn (``stick`` if none did)."""
-    from .simulation import STATES
-
-    a = case.arrays
     turned = a["turned"].astype(bool)                      # (step, particle)
     steps = np.flatnonzero(turned.any(axis=1))
     out.update(turning_steps=int(steps.size), final_compression=float(a["compression"][-1]),
@@ -803,36 +774,17 @@ def _layer_case_summary(case: _CaseData, out: dict) -> dict:
         out.update(first_turn_force=float(a["total_force"][k]),
                    first_turn_compression=float(a["compression"][k]))
         first = STATES[int(a["state"][k][np.flatnonzero(turned[k])[0]])]
+    if turned.shape[1] == 1:
+        # a case that never turned did not rotate: exactly 0, not the round-off of q q0⁻¹
+        total, azimuth = _total_rotation(case) if steps.size else (0.0, math.nan)
+        sign = float(direction_sign(a["tangential_force"][:, 0])[-1])
+        out.update(total_rotation=total, turn_azimuth=azimuth,
+                   final_state=int(a["state"][-1, 0]),
+                   final_ratio_up=sign * float(a["ratio"][-1, 0, 0]),
+                   final_ratio_low=sign * float(a["ratio"][-1, 0, 1]))
     if case.status == "complete" and not case.partial:
         out["behaviour"] = _BEHAVIOUR_CODE.get(first, _BEHAVIOUR_CODE["failed"])
     return out
-
-
-_SUMMARY_VARIABLES = {
-    "behaviour": ("1", "behaviour over the run: " + ", ".join(BEHAVIOURS)),
-    "total_rotation": ("degree", "angle from the initial to the final orientation, negative "
-                                 "if its axis points to -y (turns about y: the change of "
-                                 "theta)"),
-    "turn_azimuth": ("degree", "azimuth of the axis of the total rotation, from +x"),
-    "first_turn_force": ("N", "normal force at the first turning step (NaN: never turned)"),
-    "first_turn_compression": ("1", "compression at the first turning step"),
-    "turning_steps": ("1", "number of steps in which the particle turned"),
-    "final_state": ("1", "state at the last step done (-1: none)"),
-    "final_ratio_up": ("1", "F_T/(mu_up F_N) at the last step, signed as in the state plot: "
-                            "negative when F' points against its first direction"),
-    "final_ratio_low": ("1", "F_T/(mu_low F_N) at the last step, signed as in the state plot: "
-                             "negative when F' points against its first direction"),
-    "final_compression": ("1", "compression (d0 - h)/d0 at the last step"),
-    "steps_done": ("1", "load steps completed"),
-    "compute_time": ("s", "wall time of the case's load steps (sum of time_total)"),
-    "final_loaded": ("1", "layers: particles loaded at the last step"),
-    "final_fraction_stick": ("1", "layers: fraction of the loaded particles sticking at the "
-                                  "last step"),
-    "final_fraction_roll": ("1", "layers: fraction of the loaded particles rolling at the "
-                                 "last step"),
-    "final_fraction_rotate": ("1", "layers: fraction of the loaded particles rotating at the "
-                                   "last step"),
-}
 
 
 def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
@@ -843,14 +795,13 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
     files already read (by case id), not read again."""
     import xarray as xr
 
-    from .simulation import STATES
-
     out = Path(out)
     cases = cases if cases is not None else sweep.cases()
     records = records or {}
     shape = sweep.shape
     dims = tuple(a.name for a in sweep.axes)
-    scalars = {name: np.full(shape, np.nan) for name in _SUMMARY_VARIABLES}
+    summaries = {v.name: v for v in schema.by_kind("summary")}
+    scalars = {name: np.full(shape, np.nan) for name in summaries}
     status = np.full(shape, "missing", dtype=object)
     ids = np.full(shape, "", dtype=object)
     datasets = {}
@@ -863,7 +814,7 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
         data_ = (loaded or {}).get(case.case_id)
         if data_ is None:
             try:
-                data_ = _read_case(path, _SUMMARY_NAMES)
+                data_ = _read_case(path, _summary_names())
             except UnreadableCase:          # reported as missing; the file stays
                 data_ = None
         if data_ is not None:
@@ -883,46 +834,45 @@ def summarize(sweep: Sweep, out: str | Path, cases: list[Case] | None = None,
             scalars[name][case.index] = value
         rows.append({**{a.key: case.values[a.key] for a in sweep.axes}, "case": case.case_id,
                      "status": status[case.index],
-                     **{k: summ.get(k, math.nan) for k in _SUMMARY_VARIABLES}})
+                     **{k: summ.get(k, math.nan) for k in summaries}})
     data = {}
-    for name, (units, long_name) in _SUMMARY_VARIABLES.items():
+    for name, var in summaries.items():
         values = scalars[name]
-        attrs = {"units": units, "long_name": long_name}
-        if name == "behaviour":
-            values = values.astype(np.int8)
-            attrs.update(flag_values=np.arange(len(BEHAVIOURS), dtype=np.int8),
-                         flag_meanings=" ".join(BEHAVIOURS))
-        elif name == "final_state":
-            values = np.nan_to_num(values, nan=-1).astype(np.int8)
-            attrs.update(flag_values=np.arange(len(STATES), dtype=np.int8),
-                         flag_meanings=" ".join(STATES))
-        elif name in ("turning_steps", "steps_done"):
-            values = np.nan_to_num(values, nan=0).astype(np.int32)
-        data[name] = (dims, values, attrs)
+        if var.dtype != "float64":
+            fill = var.fill if not var.flags else var.flags.index(var.fill)
+            values = np.nan_to_num(values, nan=fill).astype(var.dtype)
+        data[name] = (dims, values, var.attrs)
+    data["final_state"][2].update(flag_values=np.arange(len(STATES), dtype=np.int8),
+                                  flag_meanings=" ".join(STATES))
     data["status"] = (dims, status.astype(str), {"long_name": "case status"})
     data["case"] = (dims, ids.astype(str), {"long_name": "case id: file cases/<case>.nc"})
     coords = {a.name: (a.name, _coord(a.values), {"config_key": a.key, "units": a.units})
               for a in sweep.axes}
-    complete = {len(d.arrays["state"]) for d in datasets.values()
-                if d.status == "complete" and not d.partial}
-    if len(complete) == 1:                      # per-step scalars share one step axis
-        n_steps = complete.pop()
+    complete = [d for d in datasets.values() if d.status == "complete" and not d.partial]
+    if len({len(d.arrays["state"]) for d in complete}) == 1:
+        # per-step values share one step axis (per-particle ones: and one particle count)
+        n_steps = len(complete[0].arrays["state"])
+        same_particles = len({d.arrays["state"].shape[1] for d in complete}) == 1
         coords["step"] = ("step", np.arange(n_steps), {"long_name": "load step index"})
-        extra_dims = {v.name: v.dims for v in (*VARIABLES, *LAYER_VARIABLES)}
-        layers = any(_is_layer(d) for d in datasets.values())
-        for name in LAYER_STEP_VARIABLES if layers else STEP_VARIABLES:
-            extra = extra_dims[name]
-            arr = np.full((*shape, n_steps, *[len(_RECORD_COORDS[d]) for d in extra]), np.nan)
-            attrs = {}
+        for var in schema.VARIABLES.values():
+            if not var.summary or (var.kind == "particle" and not same_particles):
+                continue
+            lead = (n_steps,) if var.kind == "step" else (
+                n_steps, complete[0].arrays["state"].shape[1])
+            arr = np.full((*shape, *lead, *var.shape), np.nan)
             for index, d in datasets.items():
-                values = d.arrays[name][:n_steps]
-                arr[index][:len(values)] = values
-                attrs = d.attrs[name]
-            if name == "state":
+                values = d.arrays[var.name][:n_steps]
+                if values.shape[1:] == arr.shape[len(shape) + 1:]:
+                    arr[index][:len(values)] = values
+            if var.flags:
                 arr = np.nan_to_num(arr, nan=-1).astype(np.int8)
-            data[name] = ((*dims, "step", *extra), arr, attrs)
-            for d in extra:
-                coords[d] = (d, list(_RECORD_COORDS[d]))
+            extra = ("step",) if var.kind == "step" else ("step", "particle")
+            data[var.name] = ((*dims, *extra, *var.tail), arr, var.attrs)
+            for d in var.tail:
+                coords[d] = (d, list(schema.DIMENSIONS[d].labels))
+            if var.kind == "particle":
+                coords["particle"] = ("particle", np.arange(lead[1]),
+                                      {"long_name": "particle index (layer order)"})
     from ._version import __version__
 
     summary = xr.Dataset(data, coords=coords, attrs={

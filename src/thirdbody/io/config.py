@@ -13,6 +13,7 @@ A configuration has four tables (SI units throughout; angles in degrees)::
     orientation_deg = 20.0           # tilt, degrees, about the axis at tilt_axis_deg
     tilt_axis_deg = 90.0            # azimuth of the tilt axis from +x (90: +y, the paper's)
     yaw_deg = 0.0                   # about the body z axis, before the tilt
+    # azimuth_deg = 30.0            # last: about the world's vertical (turns the whole problem)
     # quaternion = [0, 0.17, 0, 0.98]   # or the orientation as (x, y, z, w)
 
     [plates]
@@ -128,6 +129,9 @@ class Particle(_Model):
                            description="rotation about the body z axis before the tilt")
     quaternion: tuple[_Num, _Num, _Num, _Num] | None = Field(
         None, description="initial orientation (x, y, z, w), instead of the tilt")
+    azimuth_deg: _Num | None = Field(None, allow_inf_nan=False,
+                                     description="last, a rotation about the world's vertical "
+                                     "axis, degrees (turns the whole orientation)")
 
     @model_validator(mode="after")
     def _one_orientation(self):
@@ -226,7 +230,8 @@ class Numerics(_Model):
                                     "(nu < 0.5); default off: Goodman's approximation")] = False
 
 
-_MATERIAL_KEYS = ("E", "nu", "orientation_deg", "tilt_axis_deg", "yaw_deg", "quaternion")
+_MATERIAL_KEYS = ("E", "nu", "orientation_deg", "tilt_axis_deg", "yaw_deg", "quaternion",
+                  "azimuth_deg")
 
 
 def _split(table: dict, extra: tuple[str, ...] = ()) -> dict:
@@ -306,7 +311,8 @@ class Config(_Model):
         import thirdbody as tb
 
         return tb.Particle(self._shape(pc.geometry), tb.Material(pc.E, pc.nu),
-                           pc.orientation_deg, pc.tilt_axis_deg, pc.yaw_deg, pc.quaternion)
+                           pc.orientation_deg, pc.tilt_axis_deg, pc.yaw_deg, pc.quaternion,
+                           pc.azimuth_deg or 0.0)
 
     def build(self):
         """(Particle or Layer, Plates, load program, Simulation keyword arguments)."""

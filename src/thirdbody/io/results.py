@@ -25,6 +25,8 @@ spends about 1 ms a step handing a step over instead of the 5-25 ms of writing i
 from __future__ import annotations
 
 import base64
+import json
+import math
 import os
 import pickle
 import shutil
@@ -40,9 +42,11 @@ __all__ = ["RESUME_VARIABLE", "STEP_HISTORY_VARIABLE", "open_results", "run_to_f
 RESUME_VARIABLE = "_resume_state"
 STEP_HISTORY_VARIABLE = "_resume_step"
 #: dimensions that grow as the run goes on (unlimited in an unfinished file)
-_GROWING = ("step", "map_step", "event", "resume_bytes", "map_y", "map_x", "map_j", "map_i")
-#: the maps' lattice dimensions (y, x) of a particle's and of a layer's results
-_MAP_DIMS = (("map_y", "map_x"), ("map_j", "map_i"))
+_GROWING = ("step", "map_step", "event", "resume_bytes", "map_j", "map_i")
+#: the maps' lattice dimensions (y, x)
+_MAP_DIMS = ("map_j", "map_i")
+#: the maps' metre coordinates, on (particle, lattice dimension)
+_MAP_COORDS = {"map_x": "map_i", "map_y": "map_j"}
 #: room to grow given to the maps' window when it must be enlarged: this fraction of its size
 #: on every side, at least _MARGIN_CELLS cells
 _MARGIN = 0.25
@@ -61,11 +65,108 @@ def write_results(ds, path: str | Path, resume_state: bytes | None = None) -> No
 
 
 def open_results(path: str | Path):
-    """Load a results file into memory (the file is not kept open)."""
+    """Load a results file into memory (the file is not kept open), in today's form: a file
+    of an earlier format (see :data:`thirdbody.schema.FORMAT_VERSION`) is converted on reading
+    (:func:`upgrade`)."""
     import xarray as xr
 
     with xr.open_dataset(path, engine="h5netcdf") as ds:
-        return ds.load()
+        return upgrade(ds.load())
+
+
+def file_format(ds) -> int:
+    """The file format version a results dataset was written in (1: before the attribute)."""
+    return int(ds.attrs.get("thirdbody_format", 1))
+
+
+def upgrade(ds):
+    """A results dataset of file format 1 in today's form; others unchanged.
+
+    Format 1 wrote a single particle without the ``particle`` dimension (its maps on metre
+    dimensions ``map_x``, ``map_y``) and a layer's maps on cell indices only. The conversion
+    adds the ``particle`` dimension (size 1), the step's totals of a layer (``total_force``,
+    ``loaded``, the state fractions, the plate's force and moment), ``load_share``, the static
+    variables and the event table, and the maps' metre coordinates. A particle's ``size`` is
+    not in a format-1 file of one particle: NaN. The result says ``upgraded_from_format``."""
+    import xarray as xr
+
+    from .. import schema
+    from ..records import _dim_attrs, _events_from_arrays
+
+    version = file_format(ds)
+    if version >= schema.FORMAT_VERSION:
+        return ds
+    inputs = json.loads(ds.attrs.get("inputs", "{}"))
+    if "particle" not in ds.dims:
+        layer_level = {v.name for v in schema.by_kind("step")} & set(ds.data_vars)
+        cell = float(inputs.get("cell_size", math.nan))
+        out = {}
+        rename = {"map_x": "map_i", "map_y": "map_j"}
+        for name, var in ds.data_vars.items():
+            if name in layer_level or not {"step", "map_step"} & set(var.dims):
+                out[name] = (var.dims, var.values, var.attrs)
+            else:       # a particle's: the particle dimension after step (map_step)
+                dims = [rename.get(d, d) for d in var.dims]
+                out[name] = ((dims[0], "particle", *dims[1:]), var.values[:, None],
+                             var.attrs)
+        coords = {name: (c.dims, c.values, c.attrs) for name, c in ds.coords.items()
+                  if name not in rename}
+        new = xr.Dataset(out, coords=coords, attrs=dict(ds.attrs))
+        if "map_x" in ds.dims:
+            new = new.assign_coords(
+                map_i=("map_i", np.rint(ds.map_x.values / cell).astype(int),
+                       _dim_attrs("map_i")),
+                map_j=("map_j", np.rint(ds.map_y.values / cell).astype(int),
+                       _dim_attrs("map_j")))
+        state = ds.state.values
+        unloaded = schema.STATES.index("unloaded")
+        loaded = (state != unloaded).astype(np.int64)
+        n = np.maximum(loaded, 1)
+        F = ds.normal_force.values
+        fx, fy = ds.tangential_force.sel(component="x").values, \
+            ds.tangential_force.sel(component="y").values
+        h = ds.plate_gap.values
+        px = ds.position.sel(component="x").values + ds.centroid.sel(
+            interface="upper", component="x").values
+        py = ds.position.sel(component="y").values + ds.centroid.sel(
+            interface="upper", component="y").values
+        step_values = {
+            "total_force": F, "loaded": loaded,
+            "fraction_stick": (state == schema.STATES.index("stick")) * loaded / n,
+            "fraction_roll": np.isin(state, [1, 2]) * loaded / n,
+            "fraction_rotate": (state == schema.STATES.index("rotate")) * loaded / n,
+            "plate_force": np.stack([fx, fy], axis=-1) * loaded[:, None],
+            "plate_moment": np.nan_to_num(np.stack([py * F - h * fy, h * fx - px * F],
+                                                   axis=-1)) * loaded[:, None],
+            "share_error": np.zeros(len(state)),
+        }
+        for name, values in step_values.items():
+            var = schema.VARIABLES[name]
+            new[name] = (var.dims, np.asarray(values, dtype=var.dtype), var.attrs)
+        new["load_share"] = (("step", "particle"), (F > 0).astype(float)[:, None],
+                             schema.VARIABLES["load_share"].attrs)
+        static = {"x0": [0.0], "y0": [0.0], "size": [float(inputs.get("size", math.nan))],
+                  "cell_size": [cell], "shape": [str(inputs.get("shape", ""))]}
+        for name, values in static.items():
+            var = schema.VARIABLES[name]
+            new[name] = (var.dims, var.array(values, (1,)), var.attrs)
+        events = _events_from_arrays(ds.step.values, [[schema.STATES[c]] for c in state],
+                                     ds.turned.values.astype(bool)[:, None], F[:, None],
+                                     ds.rotation_angle.values[:, None])
+        for name, values in events.items():
+            var = schema.VARIABLES[name]
+            new[name] = (var.dims, var.array(values, (len(values),)), var.attrs)
+        new = new.assign_coords(particle=("particle", [0], _dim_attrs("particle")))
+        ds = new
+    if "map_i" in ds.dims and "map_x" not in ds.coords:
+        cells = ds.cell_size.values
+        ds = ds.assign_coords(
+            map_x=(("particle", "map_i"), cells[:, None] * ds.map_i.values[None, :],
+                   {"units": "m", "long_name": "x of the cell centre (particle frame)"}),
+            map_y=(("particle", "map_j"), cells[:, None] * ds.map_j.values[None, :],
+                   {"units": "m", "long_name": "y of the cell centre (particle frame)"}))
+    return ds.assign_attrs(thirdbody_format=schema.FORMAT_VERSION,
+                           upgraded_from_format=version)
 
 
 def _blob_variable(blob: bytes) -> tuple:
@@ -450,9 +551,9 @@ class _Columns:
 def _regrid(f, tail, old: tuple[int, int, int, int], new: tuple[int, int, int, int]) -> None:
     """Move the maps of the open h5py file ``f`` from the lattice window ``old`` to ``new``
     (cells (i0, j0, nx, ny); zeros where ``new`` goes beyond ``old``, cropped where it is
-    smaller) and write the new window's coordinates, taken from ``tail`` (a dataset on
-    ``new``)."""
-    ydim, xdim = next(dims for dims in _MAP_DIMS if dims[1] in tail.dims)
+    smaller) and write the new window's coordinates (cell indices and metres), taken from
+    ``tail`` (a dataset on ``new``)."""
+    ydim, xdim = _MAP_DIMS
     di, dj = old[0] - new[0], old[1] - new[1]       # old cell (0, 0) in the new window
     xs = slice(max(0, -di), min(old[2], new[2] - di))
     ys = slice(max(0, -dj), min(old[3], new[3] - dj))
@@ -469,6 +570,10 @@ def _regrid(f, tail, old: tuple[int, int, int, int], new: tuple[int, int, int, i
         d = f[dim]
         d.resize(tail.sizes[dim], axis=0)
         d[...] = tail[dim].values
+    for name in _MAP_COORDS:
+        d = f[name]
+        d.resize(tail[name].values.shape)
+        d[...] = tail[name].values
 
 
 def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = None) -> None:
@@ -511,6 +616,10 @@ def run_to_file(sim, path: str | Path, *, resume: bool = False,
         if RESUME_VARIABLE not in saved:
             raise ValueError(f"{path} holds a finished run ({saved.attrs.get('status')}); "
                              "nothing to resume")
+        if "upgraded_from_format" in saved.attrs:
+            raise ValueError(f"{path} was written by an earlier thirdbody (file format "
+                             f"{saved.attrs['upgraded_from_format']}): it can be read, not "
+                             "resumed; run the configuration again into a new directory")
         blob, n_maps = saved_snapshot(saved)
         if STEP_HISTORY_VARIABLE in saved:    # else an earlier version's file: all anew
             history = [str(t) for t in saved[STEP_HISTORY_VARIABLE].values]

@@ -76,6 +76,7 @@ import xarray as xr
 from scipy.spatial.transform import Rotation
 
 from thirdbody.layer import Layer
+from thirdbody.schema import DIMENSIONS
 from thirdbody.shapes import MeshShape, Shape
 
 __all__ = ["NEAR_PLATE_CELLS", "export_vtk", "export_vtk_cli"]
@@ -83,8 +84,10 @@ __all__ = ["NEAR_PLATE_CELLS", "export_vtk", "export_vtk_cli"]
 #: a vertex samples a plate's contact map when it is at most this many cell sizes from it
 NEAR_PLATE_CELLS = 3.0
 
+#: the results' variables (:mod:`thirdbody.schema`) the export reads
 _POSE_VARIABLES = ("quaternion", "position", "centroid_height", "plate_gap", "state")
 _LAYER_VARIABLES = ("x0", "y0", "cell_size")
+_MAP_VARIABLES = ("pressure", "traction", "status")
 
 
 @dataclass(frozen=True)
@@ -113,12 +116,11 @@ class _Results:
 
 
 def _read(ds: xr.Dataset) -> _Results:
-    """Check ``ds`` and take out what the export needs (ValueError naming what is missing)."""
+    """Check ``ds`` (in today's form: :func:`~thirdbody.io.results.upgrade`) and take out what
+    the export needs (ValueError naming what is missing)."""
     if "step" not in ds.dims:
         raise ValueError("not a thirdbody results dataset: it has no 'step' dimension")
-    layer = "particle" in ds.dims
-    required = _POSE_VARIABLES + (_LAYER_VARIABLES if layer else ())
-    missing = [v for v in required if v not in ds.variables]
+    missing = [v for v in _POSE_VARIABLES + _LAYER_VARIABLES if v not in ds.variables]
     if "centroid_height" in missing:
         raise ValueError("the results have no 'centroid_height' variable (written by an older "
                          "thirdbody): re-run the simulation to export it")
@@ -127,66 +129,41 @@ def _read(ds: xr.Dataset) -> _Results:
 
     def per_particle(name: str, *tail: str) -> np.ndarray:
         da = ds[name]
-        for dim, labels in (("quaternion_component", ["x", "y", "z", "w"]),
-                            ("component", ["x", "y"])):
-            if dim in tail and dim in da.coords:
-                da = da.sel({dim: labels})
-        if not layer:
-            da = da.expand_dims("particle", axis=1)
+        for dim in ("quaternion_component", "component"):
+            if dim in tail:
+                da = da.sel({dim: list(DIMENSIONS[dim].labels)})
         return np.asarray(da.transpose("step", "particle", *tail).values, dtype=float)
 
     quat = per_particle("quaternion", "quaternion_component")
     position = per_particle("position", "component")
     height = per_particle("centroid_height")
-    state_da = ds["state"].transpose("step", "particle") if layer else ds["state"]
-    state = np.asarray(state_da.values).astype(np.int8).reshape(height.shape)
+    state = np.asarray(ds["state"].transpose("step", "particle").values).astype(np.int8)
     n_steps, n_particles = height.shape
-    if layer:
-        x0 = np.asarray(ds["x0"].values, dtype=float)
-        y0 = np.asarray(ds["y0"].values, dtype=float)
-    else:
-        x0 = y0 = np.zeros(1)
+    x0 = np.asarray(ds["x0"].values, dtype=float)
+    y0 = np.asarray(ds["y0"].values, dtype=float)
     centre = np.stack([x0 + position[..., 0], y0 + position[..., 1], height], axis=-1)
-
-    has_maps = all(v in ds.variables for v in ("pressure", "traction", "status"))
-    if layer:
-        cell = np.asarray(ds["cell_size"].values, dtype=float)
-        if has_maps:
-            map_x = cell[:, None] * np.asarray(ds["map_i"].values, dtype=float)[None, :]
-            map_y = cell[:, None] * np.asarray(ds["map_j"].values, dtype=float)[None, :]
-        else:
-            map_x = map_y = np.zeros((n_particles, 0))
-        dims = ("map_j", "map_i")
-    else:
-        if has_maps:
-            mx = np.asarray(ds["map_x"].values, dtype=float)
-            my = np.asarray(ds["map_y"].values, dtype=float)
-            if len(mx) < 2 or len(my) < 2:
-                raise ValueError("the contact maps need at least 2 cells along x and y")
-            cell = np.array([abs(mx[1] - mx[0])])
-            map_x, map_y = mx[None, :], my[None, :]
-        else:
-            # no maps: no cell size in the file; any positive value draws the same output
-            cell = np.ones(1)
-            map_x = map_y = np.zeros((1, 0))
-        dims = ("map_y", "map_x")
+    cell = np.asarray(ds["cell_size"].values, dtype=float)
 
     maps: dict[str, _Maps] = {}
-    if has_maps:
+    if all(v in ds.variables for v in _MAP_VARIABLES):
+        # the cell centres (m): each particle's cell size times the lattice index
+        map_x = cell[:, None] * np.asarray(ds["map_i"].values, dtype=float)[None, :]
+        map_y = cell[:, None] * np.asarray(ds["map_j"].values, dtype=float)[None, :]
+
         def field(name: str, interface: str, *extra: str) -> np.ndarray:
             da = ds[name].sel(interface=interface)
             if "component" in extra:
-                da = da.sel(component=["x", "y"])
-            if not layer:
-                da = da.expand_dims("particle", axis=1)
-            return np.asarray(da.transpose("map_step", "particle", *extra, *dims).values)
+                da = da.sel(component=list(DIMENSIONS["component"].labels))
+            return np.asarray(da.transpose("map_step", "particle", *extra, "map_j",
+                                           "map_i").values)
 
-        for interface in ("upper", "lower"):
+        for interface in DIMENSIONS["interface"].labels:
             maps[interface] = _Maps(field("pressure", interface),
                                     field("traction", interface, "component"),
                                     field("status", interface).astype(np.int8))
         map_steps = np.asarray(ds["map_step"].values, dtype=np.int64)
     else:
+        map_x = map_y = np.zeros((n_particles, 0))
         map_steps = np.zeros(0, dtype=np.int64)
 
     return _Results(
@@ -317,17 +294,20 @@ def export_vtk(ds: xr.Dataset, layer: Layer, out_dir: str | Path, *,
     if not isinstance(layer, Layer):
         raise TypeError("layer must be a thirdbody.Layer (use Layer.of(particle) for one "
                         "particle)")
+    from thirdbody.io.results import upgrade
+
+    if "step" in ds.dims:
+        ds = upgrade(ds)
     results = _read(ds)
     n_steps, n_particles = results.state.shape
     if len(layer) != n_particles:
         raise ValueError(f"the layer has {len(layer)} particles but the results have "
                          f"{n_particles}")
-    if "particle" in ds.dims:
-        xy0 = np.stack([ds["x0"].values, ds["y0"].values], axis=-1)
-        scale = max(float(np.max(np.abs(xy0))), 1e-12)
-        if not np.allclose(layer.positions, xy0, rtol=0.0, atol=1e-9 * scale + 1e-15):
-            raise ValueError("the layer's particle positions differ from the results' x0, y0: "
-                             "pass the layer the results were computed for")
+    xy0 = np.stack([ds["x0"].values, ds["y0"].values], axis=-1)
+    scale = max(float(np.max(np.abs(xy0))), 1e-12)
+    if not np.allclose(layer.positions, xy0, rtol=0.0, atol=1e-9 * scale + 1e-15):
+        raise ValueError("the layer's particle positions differ from the results' x0, y0: "
+                         "pass the layer the results were computed for")
 
     surfaces = [_surface(placed.particle.shape, subdivisions) for placed in layer]
     offsets = np.cumsum([0] + [len(v) for v, _ in surfaces])

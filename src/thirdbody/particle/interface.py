@@ -112,6 +112,13 @@ class InterfaceNormal:
     spots: int
 
 
+def surface_approach(sol: InterfaceNormal) -> float:
+    """Approach (m) of the plate measured from the lowest (upper plate: highest) surface cell
+    of the solve's window (not from the scan's reference)."""
+    g = sol.contact.gap
+    return float(sol.contact.approach - g[np.isfinite(g)].min())
+
+
 class Interface:
     """The upper or lower plate's contact with the particle.
 

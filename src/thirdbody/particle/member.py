@@ -1,5 +1,5 @@
-"""One particle of a layer between the plates: its statics on its own lattice, its tangential
-solves with their history, and what a step records about it.
+"""One particle of a layer between the plates: its statics on its own lattice and its tangential
+solves with their history (physics only: what a step records is :mod:`thirdbody.records`).
 
 The driver (:mod:`thirdbody.simulation`) owns the load: it decides each particle's normal force
 (its share of F_N, or the force at the common plate gap) and when a particle turns; a
@@ -15,16 +15,13 @@ import numpy as np
 
 from ..bem import ContactAtEdgeError, ConvergenceError, TangentialContact
 from ..bem.tangential import restart_traction
-from ..loading import LoadStep
-from ..orientation import Rotation, decompose, key
-from ..records import StepMaps, StepRecord
-from ..rigid import RigidState
-from .interface import InterfaceNormal, Window, remap
+from ..orientation import Rotation, key
+from .interface import Window, remap, surface_approach
 from .model import Particle, Plates
 from .statics import Evaluation, PairStatics
 from .surface import LOWER, UPPER
 
-__all__ = ["Compliance", "Member", "ParticleState", "step_maps"]
+__all__ = ["Compliance", "Member", "ParticleState"]
 
 
 @dataclass
@@ -121,7 +118,7 @@ class Member:
         k = key(ev.rotation)
         if k != self._points_key:
             self._points_key, self.points = k, []
-        point = (ev.force, ev.gap, _approach(ev.up) + _approach(ev.low))
+        point = (ev.force, ev.gap, surface_approach(ev.up) + surface_approach(ev.low))
         if self.points and abs(self.points[-1][0] - ev.force) <= 1e-12 * ev.force:
             # the same force again: keep the older point, so that the secant survives
             self.points = [*self.points[:-1], point]
@@ -268,124 +265,4 @@ class Member:
             b_w, b_m, b_out = w, m, out
         raise ConvergenceError("the twisting moment about z could not be balanced")
 
-    # --- records -------------------------------------------------------------------------------
-    def record(self, k: int, step: LoadStep, d0: float, ev0: Evaluation, ev: Evaluation,
-               kind: RigidState, balanced: bool, start_rotation: Rotation,
-               tangential: dict[str, TangentialContact], state: ParticleState,
-               evaluations: int) -> StepRecord:
-        """The step's variables for this particle (``d0``: the plate gap at first contact of
-        the layer, m, for the compression ratio), with the balances recomputed from the
-        fields."""
-        mu = {"up": self.plates.mu_up, "low": self.plates.mu_low}
-        F, h = ev.force, ev.gap
-        t = {"up": tangential["up"], "low": tangential["low"]}
-        sols = {"up": ev.up, "low": ev.low}
-
-        def ratio(side: str, demand: float) -> float:
-            return demand / mu[side] if mu[side] > 0 else math.nan
-
-        force, first, twist = {}, {}, 0.0
-        for side, sol in sols.items():
-            X, Y = sol.contact.grid.mesh()
-            dA = sol.contact.grid.cell_area
-            p = sol.contact.pressure
-            force[side] = float(p.sum() * dA)
-            first[side] = np.array([(p * X).sum(), (p * Y).sum()]) * dA
-            tau = t[side].traction
-            twist += float((X * tau[1] - Y * tau[0]).sum() * dA)
-        T_up, T_low = t["up"].force, t["low"].force
-        offset = first["up"] / force["up"] - first["low"] / force["low"]
-        moment = F * offset + h * T_up
-        radius = math.sqrt(max(s.contact.area for s in sols.values()) / math.pi)
-        mu_max = max(mu.values())
-        turn = (ev.rotation * start_rotation.inv()).as_rotvec()
-        sides = ("up", "low")
-        values = dict(
-            load_value=step.value, normal_force=F, plate_gap=h, compression=(d0 - h) / d0,
-            **_pose(ev.rotation),
-            rotation=(math.degrees(turn[0]) + 0.0, math.degrees(turn[1]) + 0.0),
-            rotation_angle=math.degrees(float(np.linalg.norm(turn))),
-            state=kind.value, turned=kind is not RigidState.STICK, balanced=balanced,
-            tangential_force=(float(ev.demand_force[0]), float(ev.demand_force[1])),
-            demand_ratio=tuple(ratio(s, ev0.demand) for s in sides),
-            ratio=tuple(ratio(s, ev.demand) for s in sides),
-            centroid=tuple(sols[s].centroid for s in sides),
-            approach=tuple(_approach(sols[s]) for s in sides),
-            contact_area=tuple(sols[s].contact.area for s in sides),
-            stick_area=tuple(t[s].stick_area for s in sides),
-            spots=tuple(sols[s].spots for s in sides),
-            position=tuple(state.position), centroid_height=-ev.low.plate,
-            slip=(tuple(state.slip_up), tuple(state.slip_low)),
-            shift=tuple(tuple(float(v) for v in t[s].shift) for s in sides),
-            normal_iterations=tuple(sols[s].contact.iterations for s in sides),
-            tangential_iterations=tuple(t[s].iterations for s in sides),
-            normal_residual=tuple(sols[s].contact.residual for s in sides),
-            tangential_residual=tuple(t[s].residual for s in sides),
-            force_residual=abs(force["up"] - force["low"]) / F,
-            tangential_force_residual=float(np.hypot(*(T_up + T_low))) / F,
-            moment_residual=float(np.hypot(*moment)) / (F * h),
-            twist_moment=twist,
-            twist_ratio=abs(twist) / (mu_max * F * radius) if mu_max > 0 else 0.0,
-            twist_angle=-math.degrees(t["up"].twist) + 0.0,
-            turn_evaluations=evaluations,
-            time_total=0.0, time_normal=0.0, time_tangential=0.0, time_geometry=0.0,
-        )
-        return StepRecord(k, step.kind, values)
-
-    def unloaded_record(self, k: int, step: LoadStep, d0: float, gap: float,
-                        state: ParticleState, start_rotation: Rotation,
-                        turned: bool) -> StepRecord:
-        """The record of a particle the plates do not press (shorter than the gap ``gap``, m):
-        no force, no contact (NaN where a quantity is undefined). ``turned``: it turned in the
-        step before it lost its load (from ``start_rotation``)."""
-        nan, nan2 = math.nan, (math.nan, math.nan)
-        turn = (state.rotation * start_rotation.inv()).as_rotvec()
-        values = dict(
-            load_value=step.value, normal_force=0.0, plate_gap=gap, compression=(d0 - gap) / d0,
-            **_pose(state.rotation),
-            rotation=(math.degrees(turn[0]) + 0.0, math.degrees(turn[1]) + 0.0),
-            rotation_angle=math.degrees(float(np.linalg.norm(turn))),
-            state="unloaded", turned=turned, balanced=False, tangential_force=(0.0, 0.0),
-            demand_ratio=nan2, ratio=nan2, centroid=(nan2, nan2), approach=nan2,
-            contact_area=(0.0, 0.0), stick_area=(0.0, 0.0), spots=(0, 0),
-            position=tuple(state.position), centroid_height=-self.lowest(state.rotation),
-            slip=(tuple(state.slip_up), tuple(state.slip_low)),
-            shift=((0.0, 0.0), (0.0, 0.0)), normal_iterations=(0, 0),
-            tangential_iterations=(0, 0), normal_residual=nan2, tangential_residual=nan2,
-            force_residual=nan, tangential_force_residual=nan, moment_residual=nan,
-            twist_moment=0.0, twist_ratio=0.0, twist_angle=0.0, turn_evaluations=0,
-            time_total=0.0, time_normal=0.0, time_tangential=0.0, time_geometry=0.0,
-        )
-        return StepRecord(k, step.kind, values)
-
-
-def _pose(rotation: Rotation) -> dict:
-    tilt = decompose(rotation)
-    return dict(quaternion=tuple(float(v) for v in rotation.as_quat()),
-                orientation=tilt.vector_deg, tilt=tilt.angle_deg,
-                tilt_azimuth=tilt.azimuth_deg, yaw=tilt.yaw_deg)
-
-
-def _approach(sol: InterfaceNormal) -> float:
-    """Approach (m) of the plate measured from the lowest (highest) surface cell."""
-    g = sol.contact.gap
-    return float(sol.contact.approach - g[np.isfinite(g)].min())
-
-
-def step_maps(k: int, ev: Evaluation, tangential: dict[str, TangentialContact]) -> StepMaps:
-    """The fields of both interfaces on the bounding box of their contacts (one free cell
-    around)."""
-    windows, pressure, traction, status = {}, {}, {}, {}
-    for side, sol, t in (("upper", ev.up, tangential["up"]), ("lower", ev.low, tangential["low"])):
-        c = sol.contact.contact
-        rows, cols = np.flatnonzero(c.any(axis=1)), np.flatnonzero(c.any(axis=0))
-        j0, j1 = max(rows[0] - 1, 0), min(rows[-1] + 2, c.shape[0])
-        i0, i1 = max(cols[0] - 1, 0), min(cols[-1] + 2, c.shape[1])
-        w = sol.window
-        windows[side] = (w.i0 + int(i0), w.j0 + int(j0), int(i1 - i0), int(j1 - j0))
-        pressure[side] = sol.contact.pressure[j0:j1, i0:i1].copy()
-        traction[side] = t.traction[:, j0:j1, i0:i1].copy()
-        status[side] = np.where(t.stick, 1, np.where(t.slip, 2, 0)).astype(np.int8)[j0:j1,
-                                                                                     i0:i1]
-    return StepMaps(k, windows, pressure, traction, status)
 

@@ -19,8 +19,10 @@ class Particle:
     """An elastic particle: a shape, its material and its initial orientation.
 
     The orientation is a tilt (``orientation_deg`` about the horizontal axis at azimuth
-    ``tilt_axis_deg``, after a yaw of ``yaw_deg`` about the body's z axis) or a unit
-    ``quaternion`` (x, y, z, w), body to world; see :mod:`thirdbody.orientation`.
+    ``tilt_axis_deg``, after a yaw of ``yaw_deg`` about the body's own z axis) or a unit
+    ``quaternion`` (x, y, z, w), body to world; see :mod:`thirdbody.orientation`. Then
+    ``azimuth_deg`` turns the particle about the world's vertical: R = R_z(azimuth) · R, so
+    that turning a whole problem about z is one number.
 
     Parameters
     ----------
@@ -37,6 +39,10 @@ class Particle:
     quaternion : (4,) floats, optional
         The initial orientation as a quaternion (x, y, z, w), normalised here; instead of the
         tilt (which must then keep its defaults).
+    azimuth_deg : float
+        A last rotation about the world's vertical axis (+z, counter-clockwise seen from
+        above), degrees, after the tilt or the quaternion. ``tilt(θ, φ, ψ)`` turned by α is
+        ``tilt(θ, φ + α, ψ + α)``.
     """
 
     shape: Shape
@@ -45,6 +51,7 @@ class Particle:
     tilt_axis_deg: float = 90.0
     yaw_deg: float = 0.0
     quaternion: tuple[float, float, float, float] | None = None
+    azimuth_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.shape, Shape):
@@ -53,7 +60,7 @@ class Particle:
         if not isinstance(self.material, Material):
             raise TypeError(f"particle.material must be a thirdbody.Material, got "
                             f"{type(self.material).__name__}")
-        for name in ("orientation_deg", "tilt_axis_deg", "yaw_deg"):
+        for name in ("orientation_deg", "tilt_axis_deg", "yaw_deg", "azimuth_deg"):
             value = real(f"particle.{name} (degrees)", getattr(self, name), "(-inf, inf)",
                          lambda x: True)
             object.__setattr__(self, name, value)
@@ -71,8 +78,12 @@ class Particle:
     def orientation(self) -> Rotation:
         """Initial orientation (body -> world)."""
         if self.quaternion is not None:
-            return Rotation.from_quat(self.quaternion)
-        return tilt(self.orientation_deg, self.tilt_axis_deg, self.yaw_deg)
+            rotation = Rotation.from_quat(self.quaternion)
+        else:
+            rotation = tilt(self.orientation_deg, self.tilt_axis_deg, self.yaw_deg)
+        if self.azimuth_deg == 0:
+            return rotation
+        return Rotation.from_rotvec([0.0, 0.0, np.radians(self.azimuth_deg)]) * rotation
 
 
 @dataclass(frozen=True)
