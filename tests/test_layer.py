@@ -77,9 +77,9 @@ def test_identical_spheres_share_equally_and_each_is_the_single_particle_result(
     sim = tb.Simulation(layer, tb.Plates(0.3), tb.LinearRamp(stop=total, steps=2),
                         resolution=60, maps_every=0)
     ds = quiet_run(sim)
-    single = quiet_run(tb.Simulation(tb.Particle(Sphere(R), SOFT), tb.Plates(0.3),
-                                     tb.LinearRamp(stop=total / n, steps=2), resolution=60,
-                                     maps_every=0))
+    single = tb.particle_view(quiet_run(tb.Simulation(
+        tb.Particle(Sphere(R), SOFT), tb.Plates(0.3), tb.LinearRamp(stop=total / n, steps=2),
+        resolution=60, maps_every=0)))
     shares = ds.load_share.values
     assert np.all(shares == shares[:, :1])                   # the same arithmetic: exactly equal
     assert np.allclose(shares, 1 / n, rtol=1e-14)
@@ -162,7 +162,7 @@ def _ellipsoid_and_sphere(R):
                       tb.PlacedParticle(tb.Particle(Sphere(R), STEEL), (4e-3, 0.0))])
     sim = tb.Simulation(layer, tb.Plates(0.3), tb.ForceTable([1.0]), resolution=200,
                         maps_every=0)
-    first = sim._equilibrium(sim.schedule[0], sim._initial_state(), None)
+    first = sim.sharing.equilibrium(sim.schedule[0], sim._initial_state(), None)
     ds = quiet_run(sim)
     assert sim.status == "complete"
     return first, ds, [tb.simulation.STATES[int(s)] for s in ds.state.values[0]]
@@ -318,12 +318,11 @@ def _layer_of_one(name, steps):
         load = tb.ForceTable([s.value for s in load.schedule()[:steps]])
     single = quiet_run(tb.Simulation(particle, plates, load, **numerics))
     layer = quiet_run(tb.Simulation(tb.Layer.of(particle), plates, load, **numerics))
-    one = layer.isel(particle=0).rename({"map_i": "map_x", "map_j": "map_y"})
     compared = 0
     for var in single.data_vars:
-        if var.startswith("time_") or var == "load_kind":
+        if var.startswith("time_"):
             continue
-        a, b = single[var].values, one[var].values
+        a, b = single[var].values, layer[var].values
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), var
         compared += 1
     assert compared >= 40
@@ -538,12 +537,12 @@ def test_several_particles_turning_in_one_round_do_not_depend_on_their_order():
 
 
 def test_the_share_of_a_turning_particle_balances_the_others_compliance():
-    """_share_while_turning against arithmetic done here: the others are Hertz springs
+    """share_while_turning against arithmetic done here: the others are Hertz springs
     (compliances without solves: F = (4/3) E* √R ((reach − h)/2)^{3/2}); the particle's share
     F_i must satisfy F_i + Σ F_j(h_i) = F_N to 1e-9, h_i being the gap of its own solve; with
     the others alone holding the plates above its top it is unloaded."""
-    from thirdbody.particle.member import Compliance, Member
-    from thirdbody.simulation import _share_while_turning
+    from thirdbody.particle.compliance import Compliance, share_while_turning
+    from thirdbody.particle.member import Member
 
     R = 1e-3
     member = Member(tb.Particle(Sphere(R), SOFT), tb.Plates(0.3), R / 60, 1e-8, 1e-3)
@@ -559,13 +558,13 @@ def test_the_share_of_a_turning_particle_balances_the_others_compliance():
 
     for tops, guess in (((reach - 2e-6, reach + 1e-6), 1.0), ((reach - 5e-6,), 4.9),
                         ((reach + 3e-6, reach - 1e-6, reach), 0.01)):
-        ev = _share_while_turning(member, rotation, total, [spring(t) for t in tops], guess)
+        ev = share_while_turning(member, rotation, total, [spring(t) for t in tops], guess)
         assert ev.force > 0
         rest = sum(hertz(t, ev.gap) for t in tops)
         assert abs(ev.force + rest - total) <= 1e-9 * total, (tops, ev.force, rest)
     # the others alone carry F_N with the plates above this particle's top: unloaded
     high = reach + 1e-3
-    ev = _share_while_turning(member, rotation, total, [spring(high)], 1.0)
+    ev = share_while_turning(member, rotation, total, [spring(high)], 1.0)
     assert ev.force == 0 and ev.rotation is rotation
 
 
@@ -577,8 +576,8 @@ def test_a_layer_under_gap_control_turns_each_particle_at_the_prescribed_gap():
     a, b, c = 1e-3, 0.8e-3, 0.6e-3
     alone = tb.Particle(Ellipsoid((a, b, c)), SOFT, 20.0)
     load = tb.GapRamp(stop=0.03, steps=2)
-    single = quiet_run(tb.Simulation(alone, tb.Plates(0.46), load, resolution=80,
-                                     maps_every=0))
+    single = tb.particle_view(quiet_run(tb.Simulation(alone, tb.Plates(0.46), load,
+                                                      resolution=80, maps_every=0)))
     layer = tb.Layer([tb.PlacedParticle(alone, (0.0, 0.0)),
                       tb.PlacedParticle(tb.Particle(Sphere(0.5e-3), SOFT), (5e-3, 0.0))])
     sim = tb.Simulation(layer, tb.Plates(0.46), load, resolution=80, maps_every=0)

@@ -117,7 +117,7 @@ def particle_record(k: int, step, plates, ev0, ev, kind: RigidState, balanced: b
 
     ``ev0``, ``ev``: its normal equilibria at the step's start and end (:class:`Evaluation`);
     ``kind``: what it did; ``tangential``: its tangential steps ("up", "low"); ``state``: its
-    :class:`~thirdbody.particle.member.ParticleState` after the step; ``evaluations``: the
+    :class:`~thirdbody.state.ParticleState` after the step; ``evaluations``: the
     orientations evaluated."""
     mu = {"up": plates.mu_up, "low": plates.mu_low}
     F, h = ev.force, ev.gap

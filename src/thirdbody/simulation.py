@@ -32,19 +32,19 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Iterator
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict
 
 import numpy as np
-from scipy.optimize import brentq
 
-from .checkpoint import restore, snapshot
+from . import checkpoint
 from .layer import Layer, first_overlap
+from .layer.sharing import LoadSharing
 from .loading import LoadProgram, LoadStep
 from .orientation import key
-from .particle.member import Compliance, Member, ParticleState
+from .particle.member import Member
 from .particle.model import Particle, Plates
-from .particle.statics import Evaluation, StaticsError
-from .particle.turning import find_stable_orientation, turn_kinematics
+from .particle.statics import Evaluation
+from .particle.turning import TurnSettings, turn_particle, turn_task
 from .records import (
     STATES,
     DatasetSpec,
@@ -56,27 +56,16 @@ from .records import (
     step_maps,
     unloaded_record,
 )
-from .rigid import RigidState, classify
+from .rigid import RigidState
+from .state import LayerState, ParticleState
 
 __all__ = ["STATES", "LayerState", "ParticleState", "Simulation", "SimulationError",
-           "SimulationStoppedWarning", "StepMaps",
-           "StepRecord"]
+           "SimulationStoppedWarning", "StepMaps", "StepRecord"]
 
 #: the finest grid allowed, cells per particle size (as numerics.resolution's range)
 MAX_RESOLUTION = 4000.0
 #: rounds of turns and rebalancing within one step before a cascade counts as not settling
 MAX_CASCADE_ROUNDS = 25
-#: a particle whose modelled share is below this fraction of F_N counts as unloaded
-MIN_SHARE = 1e-6
-#: a particle that lost its load while turning stays out of the load sharing unless the new
-#: gap presses it with more than this fraction of F_N (and more than where it stopped)
-LOST_LOAD_SHARE = 1e-3
-#: the layer's force balance is converged when no share is off by more than this fraction of
-#: F_N (each share's stiffness times the offset of its plate gap from the common one)
-SHARE_TOL = 1e-7
-#: ... and accepted after 60 iterations if it stalled (at the normal solver's noise) below this;
-#: the step records the largest share error it accepted (``share_error``)
-SHARE_TOL_STALLED = 1e-5
 
 
 class SimulationError(RuntimeError):
@@ -88,13 +77,6 @@ class SimulationStoppedWarning(RuntimeWarning):
 
     Its own class so that a caller that reports the stop itself (the CLI, a sweep worker) can
     silence exactly this message and leave numpy's and everyone else's warnings visible."""
-
-
-@dataclass
-class LayerState:
-    """Every particle's :class:`ParticleState`, in layer order."""
-
-    particles: list[ParticleState]
 
 
 class Simulation:
@@ -207,10 +189,11 @@ class Simulation:
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
         self.workers = workers
+        self.sharing = LoadSharing(self.members, self.d0)
         self._settings = TurnSettings(plates, classification, self.angle_step, self.angle_tol,
                                       self.d0)
         self._pool = None
-        self._share_error = 0.0
+        self.sharing.share_error = 0.0
         self.records: list = []
         self.maps: list = []
         self.status = "not run"
@@ -268,100 +251,6 @@ class Simulation:
     def _classify(self, ev: Evaluation) -> RigidState:
         return self._settings.classify(ev)
 
-    def _equilibrium(self, step: LoadStep, state: LayerState,
-                     evs: list[Evaluation | None] | None,
-                     excluded: frozenset[int] = frozenset()) -> list[Evaluation | None]:
-        """Every particle's normal equilibrium under the step's load at its current orientation;
-        ``evs`` are the evaluations so far in the step (kept where still valid); the
-        ``excluded`` particles carry nothing (they lost their load while turning)."""
-        rotations = [s.rotation for s in state.particles]
-        members = self.members
-        if step.kind == "compression":
-            if evs is not None:             # h is fixed: a turn changes nobody else
-                return [None if i in excluded else ev for i, ev in enumerate(evs)]
-            h = self.d0 * (1.0 - step.value)
-            if len(members) == 1:
-                return [members[0].at_gap(rotations[0], h, state.particles[0])]
-            out = [m.at_gap(r, h, s) if m.reach(r) > h else None
-                   for m, r, s in zip(members, rotations, state.particles, strict=True)]
-            if all(ev is None for ev in out):
-                tallest = max(m.reach(r) for m, r in zip(members, rotations, strict=True))
-                raise StaticsError(f"prescribed plate gap {h:.6g} m does not touch any particle "
-                                   f"(the tallest is {tallest:.6g} m)")
-            return out
-        total = step.value
-        if len(members) == 1:                   # it carries all: no gap search
-            if evs is not None and evs[0] is not None and evs[0].force == total:
-                return evs
-            return [members[0].at_force(rotations[0], total)]
-        return self._share_load(total, rotations, evs, excluded)
-
-    def _share_load(self, total: float, rotations, evs,
-                    excluded: frozenset[int] = frozenset()) -> list[Evaluation | None]:
-        """Force control of a layer: the plate gap h with Σ F_i(h) = ``total`` (N).
-
-        Each iteration models every particle's force at gap h from its last two solves at its
-        orientation (a power law, :meth:`Member.force_at`), finds h from the modelled sum
-        (Brent), and solves each loaded particle at its modelled share, scaled so that the
-        shares add up to ``total`` exactly. Sums are exactly rounded (``math.fsum``), so the
-        result does not depend on the order of the particles. It stops when every loaded
-        particle's plate gap h_i agrees with their force-weighted mean h so well that its
-        share is off by at most ``SHARE_TOL`` F_N (1.5 F_i |h_i − h| / δ_i, δ_i its total
-        approach; for Hertz contacts this is the force error) and no
-        unloaded particle would carry more than 10 ``MIN_SHARE`` of the load there (a margin
-        over the ``MIN_SHARE`` below which a modelled share is dropped, so that a particle on
-        the threshold cannot make the iteration cycle)."""
-        members, n = self.members, len(self.members)
-        reach = np.array([m.reach(r) for m, r in zip(members, rotations, strict=True)])
-        evs = list(evs) if evs is not None else [None] * n
-        active = [i for i in range(n) if i not in excluded]
-        for i in excluded:
-            evs[i] = None
-        if not active:
-            return evs
-        best: tuple[float, list] | None = None
-        for _ in range(60):
-            # each particle's compliance, once per iteration (Brent evaluates it many times)
-            models = {i: members[i].compliance(rotations[i]) for i in active}
-            loaded = [i for i in range(n) if evs[i] is not None]
-            if loaded and abs(math.fsum(evs[i].force for i in loaded) - total) <= 1e-12 * total:
-                h = math.fsum(evs[i].force * evs[i].gap for i in loaded) / total
-                # each share's error: its stiffness (Hertz, 1.5 F/δ) times its gap's offset
-                error = max(1.5 * evs[i].force * abs(evs[i].gap - h)
-                            / (total * members[i].points[-1][2])
-                            if members[i].points[-1][2] > 0 else math.inf for i in loaded)
-                if all(models[j].force_at(h) < 10 * MIN_SHARE * total
-                       for j in active if evs[j] is None):
-                    if error <= SHARE_TOL:
-                        self._share_error = max(self._share_error, error)
-                        return evs
-                    if best is None or error < best[0]:
-                        best = (error, list(evs))
-
-            def excess(gap: float, models=models) -> float:
-                return math.fsum(models[i].force_at(gap) for i in active) - total
-
-            top = float(reach[active].max())
-            depth = 1e-3 * top
-            while excess(top - depth) < 0:
-                depth *= 2.0
-                if depth > top:
-                    raise StaticsError("the plate gap for the normal force could not be found")
-            h = brentq(excess, top - depth, top, xtol=1e-15 * top, rtol=1e-15)
-            forces = np.array([models[i].force_at(h) if i in active else 0.0
-                               for i in range(n)])
-            forces[forces < MIN_SHARE * total] = 0.0
-            forces *= total / math.fsum(forces)
-            for i in range(n):
-                evs[i] = (members[i].at_force(rotations[i], float(forces[i]))
-                          if forces[i] > 0 else None)
-        if best is not None and best[0] <= SHARE_TOL_STALLED:
-            # stalled at the solvers' noise: accept, and record how far the shares are off
-            self._share_error = max(self._share_error, best[0])
-            return best[1]
-        raise StaticsError("the plate gap for the normal force did not settle in 60 iterations"
-                           + (f" (shares off by {best[0]:.2g} F_N)" if best else ""))
-
     def preflight(self) -> int:
         """Solve the largest load at the initial orientations once and check the resolution.
         Returns the smallest checked contact's extent in cells.
@@ -373,16 +262,13 @@ class Simulation:
         Raises :class:`SimulationError` when that load cannot be solved at all.
         """
         step = max(self.schedule, key=lambda s: s.value)
-        state = self._initial_state()
+        state = self._initial_state()           # a throwaway: the run starts afresh
+        for m, s in zip(self.members, state.particles, strict=True):
+            m.bind(s.warm)
         try:
-            evs = self._equilibrium(step, state, None)
+            evs = self.sharing.equilibrium(step, state, None)
         except Exception as exc:
             raise SimulationError(f"the largest load cannot be solved: {exc}") from exc
-        finally:
-            for m in self.members:
-                m.points = []
-                for i in m.interfaces.values():
-                    i.last = None
         smallest, which = None, 0
         total = math.fsum(ev.force for ev in evs if ev is not None)
         biggest = max(ev.force for ev in evs if ev is not None)
@@ -427,12 +313,12 @@ class Simulation:
         step = self.schedule[k]
         n = len(self.members)
         t_start = time.perf_counter()
-        self._share_error = 0.0
+        self.sharing.share_error = 0.0
         clock0 = [(m.statics.normal_time, m.statics.geometry_time) for m in self.members]
         starts = [s.rotation for s in state.particles]
         for m, s in zip(self.members, state.particles, strict=True):
             m.begin_step(s)
-        evs = self._equilibrium(step, state, None)
+        evs = self.sharing.equilibrium(step, state, None)
         first = list(evs)
         kinds = [RigidState.STICK] * n
         balanced = [False] * n
@@ -454,7 +340,7 @@ class Simulation:
                 # it lost its load within the bisection tolerance of where it was: it is at
                 # the edge, and stays out whatever the others' new share presses on it
                 stops[i] = math.inf if moved < self.angle_tol else evs[i].force
-            evs, excluded = self._rebalance(step, state, evs, excluded | lost, stops)
+            evs, excluded = self.sharing.rebalance(step, state, evs, excluded | lost, stops)
         else:
             raise SimulationError(f"the layer did not settle: particles still turned after "
                                   f"{MAX_CASCADE_ROUNDS} rounds of turns and load sharing")
@@ -468,7 +354,7 @@ class Simulation:
             else:
                 tangential.append(m.tangential(ev, s))
             t_tan.append(time.perf_counter() - t0)
-        gap = self._gap(evs)
+        gap = self.sharing.gap(evs)
         records = []
         for i, (m, ev, s) in enumerate(zip(self.members, evs, state.particles, strict=True)):
             if ev is None:
@@ -488,35 +374,10 @@ class Simulation:
         maps = [step_maps(k, ev, t) if want_maps and ev is not None else None
                 for ev, t in zip(evs, tangential, strict=True)]
         record = LayerRecord.from_particles(k, step, gap, self.d0, records, self.layer, total,
-                                            self._share_error)
+                                            self.sharing.share_error)
         if n > 1:
             record.error = self._clearance(state, evs)
         return record, (maps if want_maps else None)
-
-    def _rebalance(self, step: LoadStep, state: LayerState, evs, candidates: set[int],
-                   stops: dict[int, float]) -> tuple[list, set[int]]:
-        """The equilibrium after a round of turns, without the particles that lost their load
-        while turning (``candidates``), as long as the others really hold the plates above
-        them: a candidate that the new gap presses harder than where it stopped (``stops``:
-        its force there, N, which vanishes with the bisection tolerance; inf for a particle
-        that lost its load within the tolerance of where it was) and with more than
-        ``LOST_LOAD_SHARE`` F_N is put back; it lost its load
-        against the others as they were at the round's start, and they may have turned too.
-        With nobody else loaded, all are put back."""
-        candidates = set(candidates)
-        if step.kind == "compression":
-            return self._equilibrium(step, state, evs, frozenset(candidates)), candidates
-        total = step.value
-        while True:
-            out = self._equilibrium(step, state, evs, frozenset(candidates))
-            loaded = [ev for ev in out if ev is not None]
-            h = self._gap(out) if loaded else None
-            wrong = {i for i in candidates
-                     if h is None or self.members[i].force_at(state.particles[i].rotation, h)
-                     > max(1.5 * stops.get(i, 0.0), LOST_LOAD_SHARE * total)}
-            if not wrong:
-                return out, candidates
-            candidates -= wrong
 
     def _turns(self, unstable: list[int], step: LoadStep, state: LayerState, evs, kinds,
                balanced, counts, settled) -> set[int]:
@@ -530,20 +391,23 @@ class Simulation:
         for i in unstable:
             if kinds[i] is RigidState.STICK:
                 kinds[i] = self._classify(evs[i])
-        snapshot = None
+        held = None
         if step.kind == "force" and len(members) > 1:
-            snapshot = [m.compliance(s.rotation) for m, s in zip(members, state.particles,
-                                                                 strict=True)]
+            held = [m.compliance(s.rotation) for m, s in zip(members, state.particles,
+                                                             strict=True)]
         tasks = [(self._settings, members[i], evs[i], state.particles[i], step,
-                  None if snapshot is None else [c for j, c in enumerate(snapshot) if j != i])
+                  None if held is None else [c for j, c in enumerate(held) if j != i])
                  for i in unstable]
         if self._pool is not None and len(tasks) > 1:
-            results = list(self._pool.map(_turn_task, tasks))
+            results = list(self._pool.map(turn_task, tasks))
         else:
             results = [turn_particle(*task) for task in tasks]
         lost = set()
-        for i, (member, particle, turn) in zip(unstable, results, strict=True):
-            members[i], state.particles[i] = member, particle
+        for i, (particle, turn, times) in zip(unstable, results, strict=True):
+            state.particles[i] = particle
+            members[i].bind(particle.warm)
+            if self._pool is not None and len(tasks) > 1:   # solved in another process
+                members[i].statics.add_time(*times)
             evs[i] = turn.final
             balanced[i] = turn.balanced
             counts[i] = turn.evaluations if counts[i] <= 1 else counts[i] + turn.evaluations
@@ -552,14 +416,6 @@ class Simulation:
             if turn.lost_load and len(members) > 1:
                 lost.add(i)
         return lost
-
-    @staticmethod
-    def _gap(evs) -> float:
-        loaded = [ev for ev in evs if ev is not None]
-        if len(loaded) == 1:
-            return loaded[0].gap
-        total = math.fsum(ev.force for ev in loaded)
-        return math.fsum(ev.force * ev.gap for ev in loaded) / total
 
     def _clearance(self, state: LayerState, evs) -> str | None:
         """None, or a message naming two particles whose solids overlap after the step."""
@@ -642,14 +498,18 @@ class Simulation:
             warnings.warn(f"simulation stopped: {exc}", SimulationStoppedWarning, stacklevel=2)
         return self.dataset()
 
-    def snapshot(self, state: LayerState) -> bytes:
-        """Everything needed to continue after the last completed step (pickled)."""
-        return snapshot(self, state)
+    def snapshot(self, state: LayerState, *, history: bool = True) -> bytes:
+        """Everything needed to continue after the last completed step (pickled): the inputs,
+        ``state`` and, with ``history``, the records and maps so far
+        (:func:`thirdbody.checkpoint.snapshot`)."""
+        return checkpoint.snapshot(self.inputs(), state,
+                                   (self.records, self.maps) if history else None)
 
     def restore(self, blob: bytes) -> tuple[LayerState, int]:
-        """Load a :meth:`snapshot`; returns (state, index of the next step). The snapshot must
-        come from a run with the same inputs."""
-        return restore(self, blob)
+        """Load a :meth:`snapshot` (its records and maps become this run's); returns (state,
+        index of the next step). The snapshot must come from a run with the same inputs."""
+        state, self.records, self.maps = checkpoint.restore(blob, self.inputs())
+        return state, len(self.records)
 
     def dataset(self, records: list | None = None, maps: list | None = None,
                 frame: tuple[int, int, int, int] | None = None, raw: bool = False):
@@ -664,106 +524,3 @@ class Simulation:
     def dataset_spec(self) -> DatasetSpec:
         """What :meth:`dataset` needs besides the records and maps (picklable)."""
         return DatasetSpec(self.layer, [m.cell_size for m in self.members], self.inputs())
-
-
-@dataclass(frozen=True)
-class TurnSettings:
-    """What a turn needs besides the particle (picklable, for worker processes)."""
-
-    plates: Plates
-    classification: str
-    angle_step: float
-    angle_tol: float
-    d0: float
-
-    def classify(self, ev: Evaluation) -> RigidState:
-        return classify(ev.demand, self.plates.mu_up, self.plates.mu_low,
-                        classification=self.classification, mu_rtol=self.plates.mu_rtol)
-
-
-def turn_particle(settings: TurnSettings, member: Member, ev: Evaluation, particle: ParticleState,
-                  step: LoadStep, others: list[Compliance] | None):
-    """Turn one particle from ``ev`` to its first stable orientation (or until it loses its
-    load) and integrate its kinematics: at its share under force control (``others``: the
-    other particles' compliance, held; None for a particle alone), at the plate gap under gap
-    control. Updates and returns (member, particle state, :class:`Turn`)."""
-    m, s = member, particle
-    if step.kind == "compression":
-        h = settings.d0 * (1.0 - step.value)
-
-        def evaluate(r):
-            if m.reach(r) <= h:             # turned off the plates: it stops where it touched
-                return Evaluation.unloaded(r)
-            return m.at_gap(r, h, s)
-    elif others is None:
-        total = ev.force
-
-        def evaluate(r):
-            return m.at_force(r, total)
-    else:
-        guess = [ev.force]
-
-        def evaluate(r):
-            out = _share_while_turning(m, r, step.value, others, guess[0])
-            if out.force > 0:
-                guess[0] = out.force
-            return out
-    turn = find_stable_orientation(ev, evaluate, settings.plates.mu_min, settings.angle_step,
-                                   settings.angle_tol)
-    kinematics = turn_kinematics([*turn.path, turn.final], settings.classify)
-    s.position = s.position + kinematics.position
-    s.slip_up = s.slip_up + kinematics.slip_up
-    s.slip_low = s.slip_low + kinematics.slip_low
-    s.history.clear()
-    s.rotation = turn.final.rotation
-    m.restart_points(turn.final)        # the search ended elsewhere: model the final one
-    return m, s, replace(turn, path=())     # the path is integrated: do not ship it back
-
-
-def _turn_task(task: tuple):
-    return turn_particle(*task)
-
-
-def _share_while_turning(m: Member, rotation, total: float, others: list[Compliance],
-                         guess: float) -> Evaluation:
-    """A particle at ``rotation`` under force control, the others held: its share F_i with
-    F_i + Σ_j F_j(h_i) = ``total``, the others' forces from their compliance models, by
-    Illinois iterations on F_i in [0, total] (the residual grows with F_i). Unloaded
-    (:meth:`Evaluation.unloaded`) when the others alone hold the plates above its top."""
-
-    def rest(gap: float) -> float:
-        return math.fsum(c.force_at(gap) for c in others)
-
-    reach = m.reach(rotation)
-    lo_f, lo_r = 0.0, rest(reach) - total
-    if lo_r >= 0:
-        return Evaluation.unloaded(rotation)
-    hi_f = hi_r = None
-    F = min(max(guess, 1e-3 * total), total)
-    best = None
-    side = 0
-    for _ in range(40):
-        ev = m.at_force(rotation, F)
-        r = F + rest(ev.gap) - total
-        best = ev
-        if abs(r) <= 1e-9 * total:
-            break
-        if r > 0:
-            hi_f, hi_r = F, r
-            if side == 1:
-                lo_r *= 0.5
-            side = 1
-        else:
-            lo_f, lo_r = F, r
-            if side == -1 and hi_r is not None:
-                hi_r *= 0.5
-            side = -1
-        if hi_f is None:
-            F = min(2.0 * F, total)
-        else:
-            F = lo_f - lo_r * (hi_f - lo_f) / (hi_r - lo_r)
-            if not lo_f < F < hi_f:
-                F = 0.5 * (lo_f + hi_f)
-        if F <= MIN_SHARE * total:
-            return Evaluation.unloaded(rotation)
-    return best

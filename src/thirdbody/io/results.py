@@ -74,6 +74,17 @@ def open_results(path: str | Path):
         return upgrade(ds.load())
 
 
+def _size_from_config(ds) -> float:
+    """The particle's size (m) from the configuration stored in a results dataset (NaN
+    without one, or when it cannot be built here, e.g. a moved mesh file)."""
+    try:
+        from .config import body_from_results
+
+        return float(body_from_results(ds).shape.size)
+    except Exception:
+        return math.nan
+
+
 def file_format(ds) -> int:
     """The file format version a results dataset was written in (1: before the attribute)."""
     return int(ds.attrs.get("thirdbody_format", 1))
@@ -87,7 +98,8 @@ def upgrade(ds):
     adds the ``particle`` dimension (size 1), the step's totals of a layer (``total_force``,
     ``loaded``, the state fractions, the plate's force and moment), ``load_share``, the static
     variables and the event table, and the maps' metre coordinates. A particle's ``size`` is
-    not in a format-1 file of one particle: NaN. The result says ``upgraded_from_format``."""
+    not in a format-1 file of one particle: it comes from the stored configuration (NaN if
+    that cannot be built). The result says ``upgraded_from_format``."""
     import xarray as xr
 
     from .. import schema
@@ -145,7 +157,7 @@ def upgrade(ds):
             new[name] = (var.dims, np.asarray(values, dtype=var.dtype), var.attrs)
         new["load_share"] = (("step", "particle"), (F > 0).astype(float)[:, None],
                              schema.VARIABLES["load_share"].attrs)
-        static = {"x0": [0.0], "y0": [0.0], "size": [float(inputs.get("size", math.nan))],
+        static = {"x0": [0.0], "y0": [0.0], "size": [_size_from_config(ds)],
                   "cell_size": [cell], "shape": [str(inputs.get("shape", ""))]}
         for name, values in static.items():
             var = schema.VARIABLES[name]
@@ -230,9 +242,7 @@ class _StepWriter:
         self.seconds = {"whole": 0.0, "append": 0.0}    # wall time saving, by kind
 
     def __call__(self, sim, state) -> None:
-        from ..checkpoint import snapshot
-
-        self.save(sim, snapshot(sim, state, history=False))
+        self.save(sim, sim.snapshot(state, history=False))
 
     def save(self, sim, blob: bytes) -> None:
         """Save the steps of ``sim`` not saved yet, with the resume snapshot ``blob`` (made
@@ -354,12 +364,10 @@ class _BackgroundWriter:
         self.seconds += time.perf_counter() - start
 
     def __call__(self, sim, state) -> None:
-        from ..checkpoint import snapshot
-
         start = time.perf_counter()
         self._check()
         n, m = self.sent or (0, 0)          # the first time: the whole history (a resumed run)
-        self._send((sim.records[n:], sim.maps[m:], snapshot(sim, state, history=False),
+        self._send((sim.records[n:], sim.maps[m:], sim.snapshot(state, history=False),
                     sim.status))
         self.sent = (len(sim.records), len(sim.maps))
         self.seconds += time.perf_counter() - start

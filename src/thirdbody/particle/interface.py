@@ -32,6 +32,7 @@ from ..bem import (
 )
 from ..material import Material
 from ..orientation import key
+from ..state import WarmStart
 from .surface import LOWER, UPPER, Surfaces
 
 __all__ = ["Interface", "InterfaceNormal", "Window", "count_spots", "remap"]
@@ -140,7 +141,18 @@ class Interface:
         self.pair = ElasticPair.rigid_plate(material)
         self.index = LOWER if side == "lower" else UPPER
         self.spacing, self.tol = float(spacing), tol
-        self.last: InterfaceNormal | None = None
+        #: the particle state's warm start (:meth:`thirdbody.particle.member.Member.bind`);
+        #: without one, a private one
+        self.warm = WarmStart()
+
+    @property
+    def last(self) -> InterfaceNormal | None:
+        """The last normal solve at this plate (the next one's warm start)."""
+        return self.warm.normal.get(self.side)
+
+    @last.setter
+    def last(self, value: InterfaceNormal | None) -> None:
+        self.warm.normal[self.side] = value
 
     def _bound(self, surfaces: Surfaces, force: float) -> float:
         """A first bound (m) on the approach, from the last solve or a Hertz estimate. Only
@@ -214,9 +226,10 @@ class Interface:
         centroid = (float((p * X).sum() / total), float((p * Y).sum() / total))
         reference = surfaces.reference[self.index]
         plate = reference + delta if self.index == LOWER else reference - delta
-        self.last = InterfaceNormal(self.side, orientation, window, normal, centroid, reference,
-                                    plate, count_spots(normal.contact))
-        return self.last
+        solved = InterfaceNormal(self.side, orientation, window, normal, centroid, reference,
+                                 plate, count_spots(normal.contact))
+        self.last = solved
+        return solved
 
     def solve_tangential(self, solution: InterfaceNormal, mu: float, force: tuple[float, float],
                          previous: tuple[Window, TangentialContact] | None = None,

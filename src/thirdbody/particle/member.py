@@ -9,79 +9,28 @@ The driver (:mod:`thirdbody.simulation`) owns the load: it decides each particle
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-
-import numpy as np
 
 from ..bem import ContactAtEdgeError, ConvergenceError, TangentialContact
 from ..bem.tangential import restart_traction
 from ..orientation import Rotation, key
-from .interface import Window, remap, surface_approach
+from ..state import ParticleState, WarmStart
+from .compliance import Compliance
+from .interface import remap, surface_approach
 from .model import Particle, Plates
 from .statics import Evaluation, PairStatics
 from .surface import LOWER, UPPER
 
-__all__ = ["Compliance", "Member", "ParticleState"]
-
-
-@dataclass
-class ParticleState:
-    """Everything one particle carries from one step to the next (what a resume needs).
-
-    ``position`` and the slips are horizontal 2-vectors (m); ``history`` holds each interface's
-    last tangential step and its window; ``force_guess`` the last normal force (N) found under
-    gap control.
-    """
-
-    rotation: Rotation
-    position: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    slip_up: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    slip_low: np.ndarray = field(default_factory=lambda: np.zeros(2))
-    history: dict[str, tuple[Window, TangentialContact]] = field(default_factory=dict)
-    force_guess: float | None = None
-
-
-@dataclass(frozen=True)
-class Compliance:
-    """A particle's normal force against the plate gap at one orientation, modelled from its
-    last solves there: ``points`` (force N, plate gap m, total approach m), ``reach`` the plate
-    gap at first contact (m, from the scan), the material's E* (Pa) and the shape's size (m)."""
-
-    points: tuple[tuple[float, float, float], ...]
-    reach: float
-    E_star: float
-    size: float
-
-    def force_at(self, gap: float) -> float:
-        """The normal force (N) at plate gap ``gap`` (m): F^(2/3) linear in the gap (Hertz),
-        through the last two solves when their forces differ by more than 0.1 % (a secant);
-        otherwise through the last solve with the Hertz stiffness of its approach,
-        F ∝ (δ + h₁ − h)^(3/2), δ the total approach measured from the lowest surface cells (a
-        Newton step, free of the solver's noise); with no solve, Hertz for a radius ``size``
-        from the scanned height."""
-        pts = self.points
-        if len(pts) == 2 and abs(pts[0][0] - pts[1][0]) > 1e-3 * pts[1][0] \
-                and pts[0][1] != pts[1][1]:
-            (F0, h0, _), (F1, h1, _) = pts
-            slope = (F1 ** (2 / 3) - F0 ** (2 / 3)) / (h1 - h0)
-            if slope < 0:
-                value = F1 ** (2 / 3) + slope * (gap - h1)
-                return value**1.5 if value > 0 else 0.0
-        if pts and pts[-1][2] > 0 and pts[-1][0] > 0:
-            F1, h1, d1 = pts[-1]
-            value = (d1 + h1 - gap) / d1
-            return F1 * value**1.5 if value > 0 else 0.0
-        delta = self.reach - gap
-        return (4.0 / 3.0 * self.E_star * math.sqrt(self.size) * (delta / 2) ** 1.5
-                if delta > 0 else 0.0)
+__all__ = ["Member"]
 
 
 class Member:
     """One particle: its :class:`~thirdbody.particle.statics.PairStatics` on a lattice of cell
     size ``cell_size`` (m), and the solves of a step.
 
-    ``points`` keeps (normal force N, plate gap m, total approach m) of the last two solves at
-    the current orientation: the layer's force balance models each particle's compliance with them.
+    Its solvers start from a :class:`~thirdbody.state.WarmStart` that belongs to the particle's
+    state (:meth:`bind`): the last normal solve of each plate, and ``points``, (normal force N,
+    plate gap m, total approach m) of the last two solves at the current orientation, with
+    which the layer's force balance models the particle's compliance.
     """
 
     def __init__(self, particle: Particle, plates: Plates, cell_size: float, tol: float,
@@ -97,12 +46,33 @@ class Member:
         if self.coupling:
             self.statics.shear_solver = self._shear
         self.d0 = particle.shape.height(particle.orientation)
-        self.points: list[tuple[float, float]] = []
-        self._points_key: tuple | None = None
+        self.bind(WarmStart())
 
     @property
     def interfaces(self):
         return self.statics.interfaces
+
+    def bind(self, warm: WarmStart) -> None:
+        """Start the solves from, and record them in, ``warm`` (a particle state's)."""
+        self.warm = warm
+        for interface in self.interfaces.values():
+            interface.warm = warm
+
+    @property
+    def points(self) -> list[tuple[float, float, float]]:
+        return self.warm.points
+
+    @points.setter
+    def points(self, value: list) -> None:
+        self.warm.points = value
+
+    @property
+    def _points_key(self) -> tuple | None:
+        return self.warm.points_key
+
+    @_points_key.setter
+    def _points_key(self, value: tuple | None) -> None:
+        self.warm.points_key = value
 
     # --- normal equilibrium --------------------------------------------------------------------
     def reach(self, rotation: Rotation) -> float:
@@ -156,8 +126,10 @@ class Member:
 
     # --- tangential ----------------------------------------------------------------------------
     def begin_step(self, state: ParticleState) -> None:
-        """Coupled evaluations in this step load from ``state``'s tangential history (at its
-        orientation; elsewhere the contact is new and loads from zero)."""
+        """Solve from ``state``: its warm starts (:meth:`bind`), and for coupled evaluations its
+        tangential history (at its orientation; elsewhere the contact is new and loads from
+        zero)."""
+        self.bind(state.warm)
         self.shear_history = (key(state.rotation), state.history)
 
     def _sides(self, ev: Evaluation):

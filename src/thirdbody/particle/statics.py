@@ -143,6 +143,12 @@ class PairStatics:
         self._retired_time = 0.0
         self.normal_time = 0.0
 
+    def add_time(self, normal: float, geometry: float) -> None:
+        """Count wall time (s) spent on this particle's normal solves and geometry elsewhere
+        (in a worker process that turned it)."""
+        self.normal_time += normal
+        self._retired_time += geometry
+
     @property
     def geometry_time(self) -> float:
         """Wall time (s) spent on vertical rays so far."""

@@ -35,15 +35,18 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..orientation import turned
-from ..rigid import RigidState
+from ..rigid import RigidState, classify
+from .compliance import Compliance, share_while_turning
+from .model import Plates
 from .statics import Evaluation
 
-__all__ = ["Increments", "Turn", "TurningError", "find_stable_orientation", "turn_kinematics"]
+__all__ = ["Increments", "Turn", "TurnSettings", "TurningError", "find_stable_orientation",
+           "turn_kinematics", "turn_particle"]
 
 _GOLDEN = 0.5 * (3.0 - math.sqrt(5.0))
 
@@ -297,3 +300,72 @@ def turn_kinematics(nodes: Sequence[Evaluation],
         slip_up += sweep * (top - pivot)
         slip_low += sweep * (bottom - pivot)
     return Increments(position, slip_up, slip_low)
+
+
+# --- a particle's turn in a load step ----------------------------------------------------------
+@dataclass(frozen=True)
+class TurnSettings:
+    """What a turn needs besides the particle (picklable, for worker processes): the plates,
+    how a both-exceeded demand is read (:func:`thirdbody.rigid.classify`), the march step and
+    the bisection tolerance (rad), and d₀ (m, the gap at first contact, for gap control)."""
+
+    plates: Plates
+    classification: str
+    angle_step: float
+    angle_tol: float
+    d0: float
+
+    def classify(self, ev: Evaluation) -> RigidState:
+        return classify(ev.demand, self.plates.mu_up, self.plates.mu_low,
+                        classification=self.classification, mu_rtol=self.plates.mu_rtol)
+
+
+def turn_particle(settings: TurnSettings, member, ev: Evaluation, particle, step,
+                  others: list[Compliance] | None):
+    """Turn one particle from ``ev`` to its first stable orientation (or until it loses its
+    load) and integrate its kinematics: at its share under force control (``others``: the
+    other particles' compliance, held; None for a particle alone), at the plate gap under gap
+    control. ``member`` is the particle's :class:`~thirdbody.particle.member.Member`,
+    ``particle`` its :class:`~thirdbody.state.ParticleState`, updated in place.
+
+    Returns (the particle's state, the :class:`Turn` without its path, the wall time of its
+    normal solves and of its geometry, s): what a worker process sends back."""
+    m, s = member, particle
+    m.bind(s.warm)
+    normal0, geometry0 = m.statics.normal_time, m.statics.geometry_time
+    if step.kind == "compression":
+        h = settings.d0 * (1.0 - step.value)
+
+        def evaluate(r):
+            if m.reach(r) <= h:             # turned off the plates: it stops where it touched
+                return Evaluation.unloaded(r)
+            return m.at_gap(r, h, s)
+    elif others is None:
+        total = ev.force
+
+        def evaluate(r):
+            return m.at_force(r, total)
+    else:
+        guess = [ev.force]
+
+        def evaluate(r):
+            out = share_while_turning(m, r, step.value, others, guess[0])
+            if out.force > 0:
+                guess[0] = out.force
+            return out
+    turn = find_stable_orientation(ev, evaluate, settings.plates.mu_min, settings.angle_step,
+                                   settings.angle_tol)
+    kinematics = turn_kinematics([*turn.path, turn.final], settings.classify)
+    s.position = s.position + kinematics.position
+    s.slip_up = s.slip_up + kinematics.slip_up
+    s.slip_low = s.slip_low + kinematics.slip_low
+    s.history.clear()
+    s.rotation = turn.final.rotation
+    m.restart_points(turn.final)        # the search ended elsewhere: model the final one
+    times = (m.statics.normal_time - normal0, m.statics.geometry_time - geometry0)
+    return s, replace(turn, path=()), times     # the path is integrated: do not ship it back
+
+
+def turn_task(task: tuple):
+    """:func:`turn_particle` of a tuple of its arguments (for ``Executor.map``)."""
+    return turn_particle(*task)

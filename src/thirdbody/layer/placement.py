@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .material import Material
-from .orientation import Rotation
-from .particle.model import Particle
-from .shapes import Ellipsoid, Potato, Shape, Sphere
+from ..material import Material
+from ..orientation import Rotation
+from ..particle.model import Particle
+from ..shapes import Ellipsoid, Potato, Shape, Sphere
 
 __all__ = ["Layer", "LayerError", "PlacedParticle", "first_overlap"]
 
@@ -187,7 +187,7 @@ class Layer:
         bounding sphere (radius s) meets an earlier one's; a :class:`LayerError` says when
         ``max_attempts`` tries in a row fail.
         """
-        from ._validate import positive, real
+        from .._validate import positive, real
 
         Lx, Ly = (positive("layer.box[0] (m)", box[0]), positive("layer.box[1] (m)", box[1]))
         if (count is None) == (area_fraction is None):
