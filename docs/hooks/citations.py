@@ -2,7 +2,7 @@
 
 ``docs/methods/references.md`` holds the marker ``<!-- citations -->``; at build time it is
 replaced by every reference registered in :data:`thirdbody._citations.REFERENCES` (what
-``thirdbody.citations()`` prints), each with the public functions and classes that carry its
+``thirdbody.citations()`` prints), each with the functions and classes that carry its
 ``@cites`` mark. Nothing is written by hand, so the list follows the code.
 """
 
@@ -51,7 +51,7 @@ def citations_markdown() -> str:
     for key in sorted(REFERENCES):
         used_by = ", ".join(f"`{u}`" for u in sorted(users.get(key, ())))
         lines.append(f"- **[{key}]** {REFERENCES[key]}"
-                     + (f"  \n  Used by {used_by}." if used_by else ""))
+                     + (f"  \n  Implemented in {used_by}." if used_by else ""))
     return "\n".join(lines)
 
 
