@@ -1,36 +1,38 @@
 # Quick start:  `make demo`  (sets up .venv, runs the paper's Fig. 3 particle simulation, plots in out/fig3)
-#               `make test`  (sets up .venv, runs ruff and the whole test suite)
+#               `make test`  (sets up .venv, runs ruff, builds the docs strictly, runs the whole test suite)
 # More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
 #               `make layer` (30 potatoes between the plates), `make layer-hertz`,
 #               `make sweep` (a 20-case sweep on a local dask cluster),
 #               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`,
 #               `make bench-layer`,
-#               `make mutation` (mutmut over the particle physics)
+#               `make mutation` (mutmut over the particle physics),
+#               `make docs` (the documentation site into site/; `make test` builds it too)
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz sweep test test-fast lint bench \
+.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz sweep test test-fast lint docs bench \
 	bench-tangential bench-simulation bench-sweep bench-layer mutation clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
 
+# the test environment also builds the documentation (`make test` runs `mkdocs build --strict`)
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/activate
-	$(BIN)/pip install --quiet -e ".[test]"
+	$(BIN)/pip install --quiet -e ".[test,docs]"
 	touch $@
 
 $(VENV)/.installed-mutation: pyproject.toml | $(BIN)/activate
-	$(BIN)/pip install --quiet -e ".[test,mutation]"
+	$(BIN)/pip install --quiet -e ".[test,docs,mutation]"
 	touch $@
 
 $(VENV)/.installed-bench: pyproject.toml | $(BIN)/activate
 	@# aspher builds from source and needs Eigen >= 3.4 (it cannot download it here)
 	@test -f /usr/share/eigen3/cmake/Eigen3Config.cmake || \
 		(apt-get update -qq && apt-get install -y -qq libeigen3-dev)
-	$(BIN)/pip install --quiet -e ".[test,bench]"
+	$(BIN)/pip install --quiet -e ".[test,docs,bench]"
 	touch $@
 
 venv: $(VENV)/.installed-test
@@ -57,14 +59,20 @@ sweep: $(VENV)/.installed-test
 	$(BIN)/thirdbody sweep src/thirdbody/examples/sweep_fig4.toml -o $(OUT)/sweep_fig4
 
 test: $(VENV)/.installed-test
-	$(BIN)/ruff check src tests benchmarks examples
+	$(BIN)/ruff check src tests benchmarks examples docs/hooks
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet --site-dir site
 	$(BIN)/python -m pytest -n 2 --dist loadfile
 
 test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not slow" -x -q
 
 lint: $(VENV)/.installed-test
-	$(BIN)/ruff check src tests benchmarks examples
+	$(BIN)/ruff check src tests benchmarks examples docs/hooks
+
+# the documentation site (mkdocs-material + mkdocstrings) into site/; --strict: a broken link, a
+# missing page or an API reference that does not resolve fails the build
+docs: $(VENV)/.installed-test
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 bench: $(VENV)/.installed-bench
 	$(BIN)/python benchmarks/normal_contact.py --json benchmarks/results/normal_contact.json --md benchmarks/results/normal_contact.md
@@ -87,4 +95,4 @@ mutation: $(VENV)/.installed-mutation
 	$(BIN)/mutmut results
 
 clean:
-	rm -rf $(VENV) $(OUT) build src/*.egg-info .pytest_cache mutants
+	rm -rf $(VENV) $(OUT) build site src/*.egg-info .pytest_cache mutants

@@ -1,9 +1,9 @@
 """Orientations of a particle: 3-D rotations, with the paper's tilt about +y as a special case.
 
-Conventions (DESIGN.md §2): x, y horizontal, z up. An orientation is the rotation ``R`` that takes
-a body-frame point ``p`` to its world position ``R p`` (the centroid stays at the origin). It is
-a :class:`scipy.spatial.transform.Rotation`; everywhere an orientation is accepted, a plain
-number θ (radians) also is, meaning the paper's rotation by θ about +y (right-hand rule):
+Conventions (docs/methods/design.md §2): x, y horizontal, z up. An orientation is the rotation ``R``
+that takes a body-frame point ``p`` to its world position ``R p`` (the centroid stays at the
+origin). It is a :class:`scipy.spatial.transform.Rotation`; everywhere an orientation is accepted, a
+plain number θ (radians) also is, meaning the paper's rotation by θ about +y (right-hand rule):
 ``(x, y, z) -> (x cos θ + z sin θ, y, −x sin θ + z cos θ)``.
 
 A user describes an orientation by a *tilt*: an angle about a horizontal axis whose azimuth is

@@ -1,8 +1,8 @@
 """Rigid particle between two parallel plates: the point-contact criterion (paper eqs 1–5).
 
-Conventions (DESIGN.md §2): x horizontal in the plane of rotation, y the axis of rotation, z up.
-The orientation θ is a rotation about +y by the right-hand rule, in radians here (names ending in
-``_deg`` would be degrees). A vector (x, z) rotated by θ becomes
+Conventions (docs/methods/design.md §2): x horizontal in the plane of rotation, y the axis of
+rotation, z up. The orientation θ is a rotation about +y by the right-hand rule, in radians here
+(names ending in ``_deg`` would be degrees). A vector (x, z) rotated by θ becomes
 (x cosθ + z sinθ, −x sinθ + z cosθ); seen with x to the right and z up, +y points into the
 page, so a positive θ turns the particle clockwise in that picture.
 

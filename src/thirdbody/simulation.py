@@ -1,7 +1,8 @@
 """The quasi-static driver: deformable particles squeezed between two plates, step by step.
 
 A run is a *layer* of particles (:class:`~thirdbody.layer.Layer`); a single particle is a layer
-of one, through the same code. For each load step (DESIGN.md §3 and §3b, the paper's eqs 6-11):
+of one, through the same code. For each load step (docs/methods/design.md §3 and §3b, the paper's
+eqs 6-11):
 
 1. **Load.** Under force control the plate gap h is found with Σ F_i(h) = F_N (a monotone
    scalar root; particles shorter than h carry nothing); under gap control h is prescribed.

@@ -1,10 +1,10 @@
 """Influence coefficients of a uniformly loaded rectangular surface cell on an elastic half-space.
 
-Sign convention of this module (and of FORMULAS.md): z points into the elastic body, pressure
-p > 0 is compressive, u_z > 0 is displacement into the body, tangential tractions act on the body
-and u_x, u_y are parallel to them. A coefficient K_ab(x, y) is the displacement component ``a`` at
-field point (x, y) per unit uniform traction component ``b`` on the cell centred at the origin
-with half-sides (a, b); units m/Pa.
+Sign convention of this module (and of docs/methods/algorithms.md): z points into the elastic body,
+pressure p > 0 is compressive, u_z > 0 is displacement into the body, tangential tractions act on
+the body and u_x, u_y are parallel to them. A coefficient K_ab(x, y) is the displacement component
+``a`` at field point (x, y) per unit uniform traction component ``b`` on the cell centred at the
+origin with half-sides (a, b); units m/Pa.
 
 Sources: Love (1929) for the normal block (integral of the Boussinesq point solution); the
 tangential blocks integrate Cerruti's point solution (Johnson, *Contact Mechanics*, 1985, §3.2–3.3)

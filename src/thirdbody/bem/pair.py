@@ -11,8 +11,8 @@ material alone (Johnson, *Contact Mechanics*, 1985, §5.1; Dundurs 1969):
 
       β = [(1 − 2ν₁)/G₁ − (1 − 2ν₂)/G₂] / [2 (1 − ν₁)/G₁ + 2 (1 − ν₂)/G₂],
 
-  and the coupling influence coefficient is K_zx = β H_x/(π E*) (FORMULAS.md: for one body
-  (1 − 2ν)/(4πG) = β/(πE*)). β = 0 for two equal materials or for ν = 0.5 against a rigid body:
+  and the coupling influence coefficient is K_zx = β H_x/(π E*) (docs/methods/algorithms.md: for one
+  body (1 − 2ν)/(4πG) = β/(πE*)). β = 0 for two equal materials or for ν = 0.5 against a rigid body:
   Goodman's approximation (no coupling) is then exact.
 
 Today the particle meets rigid plates (:meth:`ElasticPair.rigid_plate`); :meth:`ElasticPair.of`
@@ -98,5 +98,6 @@ class ElasticPair:
 
     @property
     def coupling_modulus(self) -> float:
-        """β/(π E*), m/Pa per unit length: the factor of H_x in K_zx (FORMULAS.md)."""
+        """β/(π E*), m/Pa per unit length: the factor of H_x in K_zx
+        (docs/methods/algorithms.md)."""
         return self.beta / (math.pi * self.E_star)

@@ -12,8 +12,8 @@ history (the paper's eq 7, with the friction disc |τ| <= μp rather than a box 
 
 Equivalently τ minimises ½ (τ-τ⁰)ᵀ K (τ-τ⁰) - Δs·Σ(τ-τ⁰)ΔA over the discs; with a prescribed
 force Q the constraint Σ τ ΔA = Q replaces Δs, which becomes its multiplier. τ⁰ is the previous
-traction as it was, not projected on the new discs first (DESIGN.md §4 projects it): where the
-pressure fell, the projection would release a displacement K (τ⁰ − Π τ⁰) that no cell counts as
+traction as it was, not projected on the new discs first (docs/methods/design.md §4 says why): where
+the pressure fell, the projection would release a displacement K (τ⁰ − Π τ⁰) that no cell counts as
 slip, so the stick cells would not follow the plate (measured: off by 78-93 % of the step's
 displacement when the normal load drops to 0.8 or 0.3 of its value).
 

@@ -29,8 +29,8 @@ A configuration has four tables (SI units throughout; angles in degrees)::
     resolution = 80.0               # cells per particle size
     maps_every = 5
 
-A layer of many particles (DESIGN.md §3b) replaces ``[particle]`` with either a list of placed
-particles, each a ``[particle]`` table plus its centroid position ``x``, ``y`` (m)::
+A layer of many particles (docs/methods/design.md §3b) replaces ``[particle]`` with either a list of
+placed particles, each a ``[particle]`` table plus its centroid position ``x``, ``y`` (m)::
 
     [[particles]]
     shape = "sphere"

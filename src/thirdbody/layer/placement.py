@@ -1,5 +1,5 @@
 """A third-body layer: many particles, each with its own shape, size, material and orientation,
-between the same two rigid plates (DESIGN.md §3b).
+between the same two rigid plates (docs/methods/design.md §3b).
 
 Particles sit at horizontal positions (x, y) (m, the centroid; the plates are unbounded). The
 plates are rigid, so particles interact only through the common plate gap h: each loaded

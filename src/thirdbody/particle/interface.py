@@ -257,7 +257,7 @@ class Interface:
 def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,
                       side: str) -> None:
     """Refuse a contact as wide as the particle: the half-space model needs contacts much
-    smaller than the particle (DESIGN.md §3)."""
+    smaller than the particle (docs/methods/design.md §3)."""
     rows = np.flatnonzero(contact.any(axis=1))
     cols = np.flatnonzero(contact.any(axis=0))
     extent = max(rows[-1] - rows[0] + 1, cols[-1] - cols[0] + 1) * surfaces.spacing

@@ -2,8 +2,8 @@
 plates under a normal force (or a plate gap), the couple of the two pressure centroids, and the
 tangential force that keeps the particle from turning.
 
-Moment balance about the centroid (DESIGN.md §3, the paper's eqs 6-9, generalised to any
-orientation). The upper plate pushes down with F_N at its pressure centroid r̄_up, the lower one
+Moment balance about the centroid (docs/methods/design.md §3, the paper's eqs 6-9, generalised to
+any orientation). The upper plate pushes down with F_N at its pressure centroid r̄_up, the lower one
 up at r̄_low: their couple is ``F_N e_z × d`` with the horizontal offset ``d = r̄_up − r̄_low``.
 The tangential forces T_up = −T_low at the two plates, a distance h apart, add ``h e_z × T_up``.
 Balance gives

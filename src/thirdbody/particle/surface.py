@@ -6,10 +6,10 @@ axes, m). The body's horizontal footprint lies inside the disc of radius ``shape
 largest centroid-surface distance), so lattice indices −n..n with n = ⌈size/Δ⌉ + 2 hold it with
 two empty cells to spare.
 
-**Finding every spot (DESIGN.md §4).** A plate at height ``z_ref + δ`` (lower plate; the upper
-one mirrors it) can only touch cells whose initial gap ``g = z_low − z_ref`` is below δ, because
-the elastic displacement of a loaded half-space is positive everywhere. Each connected piece of
-{g < δ} holds a local minimum of g, possibly far from the lowest point. So the whole footprint
+**Finding every spot (docs/methods/design.md §4).** A plate at height ``z_ref + δ`` (lower plate;
+the upper one mirrors it) can only touch cells whose initial gap ``g = z_low − z_ref`` is below δ,
+because the elastic displacement of a loaded half-space is positive everywhere. Each connected piece
+of {g < δ} holds a local minimum of g, possibly far from the lowest point. So the whole footprint
 is scanned first on a coarse sub-lattice (every ``stride``-th cell, about 48 samples across the
 particle and at least 4 per :attr:`~thirdbody.shapes.Shape.feature_length`). A coarse sample is a
 candidate if its gap, less a curvature allowance (half its largest second difference, twice

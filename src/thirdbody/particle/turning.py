@@ -1,10 +1,10 @@
 """Turning: the first stable orientation along the way the couple turns the particle, and the
 kinematics of the turn (pure functions of the evaluated orientations).
 
-The particle is massless, so a turn runs to completion inside its load step (DESIGN.md §3). It
-turns about the horizontal axis ``e_z × F'/|F'|`` of its current couple, recomputed at every
-orientation the search visits; each leg is a rotation about a fixed axis. It stops at the first
-orientation that is *stable*:
+The particle is massless, so a turn runs to completion inside its load step (see
+docs/methods/design.md §3). It turns about the horizontal axis ``e_z × F'/|F'|`` of its current
+couple, recomputed at every orientation the search visits; each leg is a rotation about a fixed
+axis. It stops at the first orientation that is *stable*:
 
 * inside the friction limit, ``|F'| <= μ_min F_N`` (it sticks there), or
 * at a *balance*: the couple along the leg changes sign (the particle would turn back), and at

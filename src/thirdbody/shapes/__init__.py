@@ -1,9 +1,9 @@
 """Particle geometry: shapes seen through vertical rays by the two plates.
 
-Geometry only (no solver imports). Conventions (DESIGN.md §2): x horizontal in the plane of
-rotation, y the rotation axis, z up; orientation θ is a rotation about +y (right-hand rule),
-radians here; a body-frame point (x, y, z) sits at world (x cosθ + z sinθ, y, −x sinθ + z cosθ);
-every shape has its volume centroid at the body origin; lengths in metres.
+Geometry only (no solver imports). Conventions (docs/methods/design.md §2): x horizontal in the
+plane of rotation, y the rotation axis, z up; orientation θ is a rotation about +y (right-hand
+rule), radians here; a body-frame point (x, y, z) sits at world (x cosθ + z sinθ, y, −x sinθ + z
+cosθ); every shape has its volume centroid at the body origin; lengths in metres.
 
 * :class:`Shape` — the interface: :meth:`~Shape.surfaces`, :meth:`~Shape.gap_lower`,
   :meth:`~Shape.gap_upper`, extreme points, :meth:`~Shape.height`, :meth:`~Shape.mirrored`.

@@ -1,6 +1,6 @@
 """Particle shapes seen by the two plates: the abstract :class:`Shape` and frame helpers.
 
-Conventions (DESIGN.md §2)
+Conventions (design notes, docs/methods/design.md §2)
 --------------------------
 * World frame: x, y horizontal, z up. The plates are horizontal; the lower plate touches the
   particle from below, the upper plate from above.
