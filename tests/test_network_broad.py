@@ -99,7 +99,7 @@ def test_body_validates_and_moves_rigidly():
     R = Rotation.from_rotvec([0.2, -0.1, 0.4])
     moved = body.transformed(R, (0.5, 0, 0))
     p = np.array([0.1, 0.2, -0.3])
-    np.testing.assert_allclose(moved.to_world(p), R.apply(body.to_world(p)) + [0.5, 0, 0])
+    np.testing.assert_allclose(moved.to_world(p), R.apply(body.to_world(p)) + np.array([0.5, 0, 0]))
     with pytest.raises(ValueError, match="centre"):
         Body(Sphere(1.0), mat, centre=(0, 0))
     with pytest.raises(ValueError, match="centre"):
