@@ -6,8 +6,13 @@ the contact (the midpoint of the closest points). A world point x has frame coor
 ``F (x − o)``; in that frame body a lies below, body b above, and the gap along a vertical ray
 is the lowest height of b minus the highest height of a, both from :meth:`Shape.surfaces`.
 
-``F`` is the smallest rotation taking n to +z (about the axis n × z), so it turns continuously
-with n and is the identity when n = +z.
+Two frames are used. The narrow phase only needs the vertical: :func:`contact_frame` is the
+smallest rotation taking n to +z. The contact's lattice also needs tangent axes, and those are
+tied to the bodies (:func:`pair_frame`): t₁ is the tangential part of the sum of both bodies'
+x axes. So a rotation of the whole pair turns the lattice with it (the gaps, hence every scalar
+of the solution, do not change), exchanging a and b mirrors the lattice (the frame of (b, a) is
+that of (a, b) turned half a turn about t₁), and a pair spinning rigidly about n carries its
+lattice along.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ import numpy as np
 
 from ..orientation import Rotation
 
-__all__ = ["contact_frame", "gap_in_frame", "heights_in_frame", "in_plane_angle",
+__all__ = ["contact_frame", "gap_in_frame", "heights_in_frame", "pair_frame",
            "smallest_rotation"]
 
 _Z = np.array([0.0, 0.0, 1.0])
@@ -55,6 +60,23 @@ def contact_frame(normal) -> Rotation:
     return smallest_rotation(unit(normal), _Z)
 
 
+def pair_frame(a, b, normal) -> Rotation:
+    """World -> contact-frame rotation of the pair (a, b) with unit normal ``normal`` from a to b:
+    rows t₁, t₂ = n × t₁, n, with t₁ the normalised tangential part of the sum of both bodies'
+    body-x axes (their y axes if that sum is nearly normal; the smallest rotation's axes if both
+    are)."""
+    n = unit(normal)
+    for k in (0, 1):
+        axis = a.rotation.apply(np.eye(3)[k]) + b.rotation.apply(np.eye(3)[k])
+        t1 = axis - (axis @ n) * n
+        length = float(np.linalg.norm(t1))
+        if length > 0.1:
+            t1 /= length
+            t2 = np.cross(n, t1)
+            return Rotation.from_matrix(np.stack([t1, t2, n]))
+    return contact_frame(n)
+
+
 def heights_in_frame(body, frame: Rotation, origin, x, y) -> tuple[np.ndarray, np.ndarray]:
     """Lowest and highest heights (m) of ``body`` along vertical rays of the frame.
 
@@ -75,15 +97,3 @@ def gap_in_frame(a, b, frame: Rotation, origin, x, y) -> np.ndarray:
     z_low, _ = heights_in_frame(b, frame, origin, x, y)
     gap = z_low - z_up
     return np.where(np.isnan(gap), np.inf, gap)
-
-
-def in_plane_angle(old: Rotation, new: Rotation) -> float:
-    """The angle (rad, counter-clockwise about the new normal) by which the tangent axes of the
-    ``old`` frame, carried to the new normal by the smallest rotation, must turn to become the
-    new frame's axes. A 2-vector of the old tangent plane turns by this angle into the new one.
-    """
-    n_old = old.inv().apply(_Z)
-    n_new = new.inv().apply(_Z)
-    carry = smallest_rotation(n_old, n_new)
-    x_carried = new.apply(carry.apply(old.inv().apply([1.0, 0.0, 0.0])))
-    return math.atan2(float(x_carried[1]), float(x_carried[0]))

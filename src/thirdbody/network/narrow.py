@@ -40,6 +40,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from .body import Body
 from .frame import contact_frame, gap_in_frame, heights_in_frame
@@ -220,6 +221,15 @@ def _local(a: Body, b: Body, normal: np.ndarray, origin: np.ndarray, h: float, t
                 return best
             h = max(0.5 * h, h_final)
             continue
+        w, v = np.linalg.eigh(st[1][2] - st[0][2])
+        if w[0] <= 0:
+            # not a minimum of the gap here (a saddle or worse): go downhill along the
+            # direction of negative curvature, keeping the normal
+            down = v[:, 0] if (st[1][1] - st[0][1]) @ v[:, 0] <= 0 else -v[:, 0]
+            origin = origin + frame.inv().apply([*(max(h, 0.05 * size) * down), 0.0])
+            h = max(h, min(0.05 * size, 4.0 * h))
+            best = None
+            continue
         xa, xb, s, za, zb = _model_step(*st, trust)
         slope = max(float(np.linalg.norm(st[0][1])), float(np.linalg.norm(st[1][1])))
         new_normal = frame.inv().apply(np.array([-s[0], -s[1], 1.0]) / math.hypot(1.0, *s))
@@ -237,19 +247,24 @@ def _local(a: Body, b: Body, normal: np.ndarray, origin: np.ndarray, h: float, t
 
 
 def _local_gap_minimum(a: Body, b: Body, frame, origin, x0: float, y0: float, h: float,
-                       floor: float, max_iter: int = 30) -> tuple[float, float, float]:
-    """Newton's method on the vertical gap alone, in a fixed frame, from (x0, y0): returns the
-    point (m) and the gap there (m) (used to test a scan sample for a deeper minimum)."""
+                       floor: float, target: float,
+                       max_iter: int = 30) -> tuple[float, float, float]:
+    """Newton's method on the vertical gap alone, in a fixed frame, from (x0, y0), stopping as
+    soon as the gap falls below ``target`` (m): returns the point (m) and the gap there (m)
+    (used to test a scan sample for a deeper minimum)."""
     x, y = x0, y0
     best = (x, y, float(gap_in_frame(a, b, frame, origin, np.array(x), np.array(y))))
     for _ in range(max_iter):
+        if best[2] < target:
+            break
         offsets = np.array([-h, 0.0, h])
         X, Y = np.meshgrid(x + offsets, y + offsets)
         g = gap_in_frame(a, b, frame, origin, X, Y)
         if not np.isfinite(g).all():
             break
-        if g[1, 1] < best[2]:
-            best = (x, y, float(g[1, 1]))
+        k = np.unravel_index(np.argmin(g), g.shape)
+        if g[k] < best[2]:
+            best = (float(X[k]), float(Y[k]), float(g[k]))
         grad = np.array([g[1, 2] - g[1, 0], g[2, 1] - g[0, 1]]) / (2 * h)
         hxy = (g[2, 2] - g[2, 0] - g[0, 2] + g[0, 0]) / (4 * h * h)
         H = np.array([[(g[1, 2] - 2 * g[1, 1] + g[1, 0]) / h**2, hxy],
@@ -302,11 +317,26 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
     distance = float(np.linalg.norm(d))
     if distance > (a.size + b.size) * (1.0 + 1e-12):
         return None
-    if normal is None:
-        n = d / distance if distance > 0 else np.array([0.0, 0.0, 1.0])
-    else:
-        n = np.asarray(normal, dtype=float)
-        n = n / np.linalg.norm(n)
+    towards = d / distance if distance > 0 else np.array([0.0, 0.0, 1.0])
+    starts = [towards]
+    if normal is not None:
+        guess = np.asarray(normal, dtype=float).reshape(-1)
+        length = float(np.linalg.norm(guess)) if guess.shape == (3,) else 0.0
+        # a guess pointing away from b is no guess
+        if math.isfinite(length) and length > 0 and guess @ towards > 0:
+            starts.insert(0, guess / length)
+    best = None
+    for n in starts:
+        found = _search(a, b, n, tol, max_iter)
+        if found is not None and (best is None or (found.converged and not best.converged)):
+            best = found
+        if best is not None and best.converged:
+            break
+    return best
+
+
+def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int) -> Approach | None:
+    """closest_approach from one first normal estimate ``n``."""
     origin = 0.5 * (a.centre + b.centre)
     spacing = _scan_spacing(a, b)
     frame = contact_frame(n)
@@ -334,7 +364,8 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
             normal=n_k, point_a=origin_k + frame_k.inv().apply([0.0, 0.0, z_up]),
             point_b=origin_k + frame_k.inv().apply([0.0, 0.0, z_low]),
             separation=z_low - z_up, iterations=iterations, slope=slope, converged=converged)
-        if best is None or candidate.separation < best.separation:
+        if best is None or (candidate.converged, -candidate.separation) > \
+                (best.converged, -best.separation):
             best = candidate
         # a deeper minimum elsewhere in this frame? (non-convex bodies)
         frame, origin, n = frame_k, candidate.midpoint, n_k
@@ -357,13 +388,23 @@ def _deeper_start(a, b, frame, origin, scan: _Scan | None, separation: float, sp
     X, Y = np.meshgrid(scan.x, scan.y)
     near = np.hypot(X, Y) <= 1.5 * spacing
     margin = 1e-9 * max(abs(separation), spacing)
-    suspects = ~near & (scan.gap - scan.allowance < separation - margin)
+    # samples below the separation anywhere, and samples that may dip below it between
+    # themselves and their neighbours away from the point found
+    suspects = (scan.gap < separation - margin) | \
+        (~near & (scan.gap - scan.allowance < separation - margin))
     if not suspects.any():
         return None
-    order = np.argsort(scan.gap[suspects])
-    for k in order[:8]:
-        x0, y0 = float(X[suspects][k]), float(Y[suspects][k])
-        x, y, g = _local_gap_minimum(a, b, frame, origin, x0, y0, spacing / 2, floor)
-        if g < separation - margin and math.hypot(x, y) > spacing:
+    # one start per connected group of suspects: its lowest sample
+    labels, count = ndimage.label(suspects, structure=np.ones((3, 3), dtype=bool))
+    starts = []
+    for k in range(1, count + 1):
+        group = labels == k
+        j, i = np.unravel_index(np.argmin(np.where(group, scan.gap, np.inf)), group.shape)
+        starts.append((float(scan.gap[j, i]), float(X[j, i]), float(Y[j, i])))
+    target = separation - margin
+    for _, x0, y0 in sorted(starts)[:8]:
+        x, y, g = _local_gap_minimum(a, b, frame, origin, x0, y0, spacing / 2,
+                                     max(floor, 1e-3 * spacing), target)
+        if g < target and math.hypot(x, y) > spacing:
             return x, y
     return None
