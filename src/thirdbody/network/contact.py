@@ -528,7 +528,8 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
         try:
             normal = solve_normal(gap, grid, pair, force=force, approach=delta, tol=tol,
                                   initial=initial)
-        except ContactAtEdgeError:      # pragma: no cover - the window holds every cell < bound
+        except ContactAtEdgeError:
+            # the contact outgrew the cells below the bound: the bound was too small
             bound *= 2.0
             continue
         warm = (window, normal.pressure)
@@ -543,8 +544,8 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
         if low.any():
             add = np.zeros_like(rmask)
             add[rj[low], ri[low]] = True
-            extra = ring(rc, add, width=lattice.stride)
-            extra = union(extra, (rc, add))
+            grown = union(ring(rc, add, width=lattice.stride), (rc, add))
+            extra = grown if extra is None else union(extra, grown)
             continue
         return normal
     raise RuntimeError("the contact window did not settle")   # pragma: no cover
