@@ -21,7 +21,8 @@ import thirdbody as tb
 from _network_shapes import two_bumps
 from test_network_narrow import common_normal, random_pair
 from thirdbody.network import Body, HalfSpaceWarning, closest_approach, solve_contact
-from thirdbody.shapes import Ellipsoid, Sphere
+from thirdbody.particle import count_spots
+from thirdbody.shapes import Ellipsoid, MeshShape, Potato, Sphere
 
 MAT_A, MAT_B = tb.Material(2e9, 0.3), tb.Material(5e9, 0.45)
 E_STAR = 1.0 / ((1 - 0.3**2) / 2e9 + (1 - 0.45**2) / 5e9)
@@ -383,6 +384,48 @@ def test_two_spots_are_both_found():
     inside, ref = whole_window_pressure(c, a, b, 0.05)
     np.testing.assert_allclose(c.pressure, inside, rtol=0, atol=1e-7 * ref.pressure.max())
     assert ref.approach == pytest.approx(c.approach + c.separation, abs=1e-9 * c.approach)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_potato_pairs_in_general_orientations_match_a_whole_window_solve(seed):
+    """Non-convex potatoes, random orientations, pressed together: the solution equals one
+    solve on a window four times as large with the gap straight from the shapes."""
+    shape_a = Potato((1.0e-3, 0.8e-3, 0.7e-3), seed=4, amplitude=0.1, wavenumber_range=(4, 8))
+    shape_b = Potato((0.8e-3, 0.7e-3, 0.5e-3), seed=10 + seed, amplitude=0.1,
+                     wavenumber_range=(4, 8))
+    rng = np.random.default_rng(seed)
+    a = Body(shape_a, MAT_A, Rotation.random(random_state=rng))
+    b = Body(shape_b, MAT_B, Rotation.random(random_state=rng), 1.5e-3 * tangent(
+        N_OBLIQUE, rng.normal(size=3)))
+    found = closest_approach(a, b)
+    b = b.moved(centre=b.centre - found.normal * found.separation)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        c = solve_contact(a, b, mu=0.0, normal_force=0.2, cells_per_radius=8)
+    inside, ref = whole_window_pressure(c, a, b, 0.2)
+    # measured within 3.3e-7 of the peak (the solvers' tolerances: 1e-8 here, 1e-10 there)
+    np.testing.assert_allclose(c.pressure, inside, rtol=0, atol=1e-6 * ref.pressure.max())
+    assert c.spots == count_spots(ref.contact)
+
+
+def test_a_mesh_contact_matches_the_analytic_shape_it_tessellates():
+    """An ellipsoid against a tessellated ellipsoid (edges 2.1e-5 m, contact radius 6.4e-5 m,
+    8 cells across it) and against the exact one: approach within 2e-3 (measured 1.0e-3),
+    contact radius 1e-2 (1.6e-3), peak pressure 3e-2 (1.7e-2: the facets)."""
+    ellipsoid = Ellipsoid((1.0e-3, 0.7e-3, 0.5e-3))
+    mesh = MeshShape.from_shape(ellipsoid, subdivisions=6)
+    a = Body(ellipsoid, MAT_A, Rotation.random(random_state=3))
+    b = Body(ellipsoid, MAT_B, Rotation.random(random_state=4), (0.3e-3, 0.2e-3, 1.0e-3))
+    found = closest_approach(a, b)
+    b = b.moved(centre=b.centre - found.normal * found.separation)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        exact = solve_contact(a, b, mu=MU, normal_force=0.5, cells_per_radius=8)
+        faceted = solve_contact(a, Body(mesh, MAT_B, b.rotation, b.centre), mu=MU,
+                                normal_force=0.5, spacing=exact.grid.dx)
+    assert faceted.approach == pytest.approx(exact.approach, rel=2e-3)
+    assert faceted.contact_radius == pytest.approx(exact.contact_radius, rel=1e-2)
+    assert faceted.peak_pressure == pytest.approx(exact.peak_pressure, rel=3e-2)
 
 
 # --- history across frames ------------------------------------------------------------------
