@@ -66,6 +66,8 @@ def check_fields(c):
     np.testing.assert_allclose(c.tangential_force, total, rtol=0,
                                atol=1e-12 * max(c.normal_force, 1e-300))
     assert abs(c.tangential_force @ c.normal) <= 1e-12 * c.normal_force
+    # the gap is measured from first touch, at the closest points (a lattice cell)
+    assert np.min(c.gap) == pytest.approx(0.0, abs=1e-9 * c.grid.dx)
 
 
 # --- normal problem -------------------------------------------------------------------------
@@ -426,6 +428,24 @@ def test_a_mesh_contact_matches_the_analytic_shape_it_tessellates():
     assert faceted.approach == pytest.approx(exact.approach, rel=2e-3)
     assert faceted.contact_radius == pytest.approx(exact.contact_radius, rel=1e-2)
     assert faceted.peak_pressure == pytest.approx(exact.peak_pressure, rel=3e-2)
+
+
+def test_a_coarse_mesh_first_touches_at_its_lowest_cell():
+    """Facets of 4.2e-5 m: the closest approach, from a stencil spanning three facets, is
+    1.1e-8 m above the lowest cell of a 4 µm lattice: the gap's zero moves to that cell, and an
+    approach taken from the poses grows with it."""
+    ellipsoid = Ellipsoid((1.0e-3, 0.7e-3, 0.5e-3))
+    mesh = MeshShape.from_shape(ellipsoid, subdivisions=5)
+    a = Body(ellipsoid, MAT_A, Rotation.random(random_state=3))
+    b = Body(mesh, MAT_B, Rotation.random(random_state=4), (0.3e-3, 0.2e-3, 1.0e-3))
+    found = closest_approach(a, b)
+    b = b.moved(centre=b.centre - found.normal * (found.separation + 5e-6))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        c = solve_contact(a, b, mu=0.0, spacing=4e-6)
+    assert c.separation < c.closest.separation - 1e-9
+    assert np.min(c.gap) == pytest.approx(0.0, abs=1e-15)
+    assert c.approach == pytest.approx(-c.separation, rel=1e-12)
 
 
 # --- history across frames ------------------------------------------------------------------

@@ -119,7 +119,7 @@ class PairContact:
         Mutual approach of the bodies from first touch, m (the solved one under force control).
     separation : float
         Signed separation of the undeformed bodies at their poses, m (< 0: they overlap by
-        −separation).
+        −separation): the closest approach's, or for a faceted mesh the lowest cell's gap.
     normal_force : float
         N = Σ p ΔA, N, >= 0.
     tangential_force : (3,) array
@@ -398,9 +398,11 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
 
     lattice = Lattice(a, b, frame, origin, closest.separation, spacing)
     carry = None if previous is None else _Carry.of(previous, a, b, frame, spacing)
+    faceted = _smoothing(a) > 0 or _smoothing(b) > 0
     normal = _solve_normal(lattice, pair, normal_force, delta, bound, tol,
                            None if carry is None else carry.support,
-                           None if carry is None else carry.pressure)
+                           None if carry is None else carry.pressure,
+                           faceted=faceted, from_poses=normal_force is None and approach is None)
     grid = normal.grid
     _check_extent(normal, a, b)
 
@@ -417,8 +419,8 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
             load = {"shift": prev_shift + (np.zeros(2) if carry is None else carry.shift)}
         tangential = solve_tangential(normal, mu, previous=prev_step, tol=tol, twist=twist,
                                       twist_centre=(0.0, 0.0), **load)
-    return _result(a, b, closest, frame, origin, n, normal, tangential, Ha, Hb, mu, twist,
-                   half_space_limit)
+    return _result(a, b, closest, lattice.zero, frame, origin, n, normal, tangential, Ha, Hb,
+                   mu, twist, half_space_limit)
 
 
 @dataclass(frozen=True, eq=False)
@@ -496,11 +498,16 @@ def _twist_angle(rotation: Rotation, axis: np.ndarray) -> float:
 
 def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
                   delta: float | None, bound: float, tol: float,
-                  history: Window | None, warm: tuple[Window, np.ndarray] | None
-                  ) -> NormalContact:
+                  history: Window | None, warm: tuple[Window, np.ndarray] | None,
+                  faceted: bool = False, from_poses: bool = False) -> NormalContact:
     """The normal solve on a window holding every cell that can touch (see
     :mod:`~thirdbody.network.window`): grows the bound or the evaluated cells until the
-    approach is below the bound and no cell next to the evaluated ones is below the approach."""
+    approach is below the bound and no cell next to the evaluated ones is below the approach.
+
+    A cell below the closest approach means the narrow phase missed a deeper minimum, an error
+    for smooth shapes. A faceted mesh's closest approach comes from a smoothed surface (its
+    stencil spans several facets), so its first touch is moved to the lowest cell instead: the
+    lattice's zero level drops, and an approach taken from the poses grows with it."""
     extra = None
     for _ in range(_ATTEMPTS):
         corner, mask = lattice.candidates(bound)
@@ -515,8 +522,14 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
                                "the closest approach is inconsistent with the lattice")
         floor = float(g.min())
         if floor < -1e-9 * lattice.spacing - 1e-12 * abs(lattice.zero):
-            raise RuntimeError(f"a cell lies {-floor:.3g} m below the closest approach: the "
-                               "narrow phase missed a deeper minimum of the gap")
+            if not faceted:
+                raise RuntimeError(f"a cell lies {-floor:.3g} m below the closest approach: "
+                                   "the narrow phase missed a deeper minimum of the gap")
+            lattice.lower_zero(-floor)
+            if from_poses:
+                delta -= floor
+            bound -= floor
+            continue
         window = window_around(below, corner, history)
         gap = window_gap(lattice, window, corner, mask)
         grid = window.grid(lattice.spacing)
@@ -568,7 +581,7 @@ def _fsum(values: np.ndarray) -> np.ndarray:
     return np.array([math.fsum(flat[:, k]) for k in range(3)])
 
 
-def _result(a, b, closest, frame, origin, n, normal, tangential, Ha, Hb, mu, twist,
+def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha, Hb, mu, twist,
             limit) -> PairContact:
     grid = normal.grid
     dA = grid.cell_area
@@ -603,7 +616,7 @@ def _result(a, b, closest, frame, origin, n, normal, tangential, Ha, Hb, mu, twi
     return PairContact(
         a=a, b=b, normal=n, origin=origin, frame=frame, grid=grid, gap=normal.gap,
         pressure=p, traction=tau, contact=normal.contact, stick=stick,
-        approach=float(normal.approach), separation=float(closest.separation),
+        approach=float(normal.approach), separation=float(separation),
         normal_force=force_n, tangential_force=tangential_force, moment_a=moment_a,
         moment_b=moment_b, area=area,
         stick_area=0.0 if tangential is None else tangential.stick_area,

@@ -272,6 +272,11 @@ def _local_gap_minimum(a: Body, b: Body, frame, origin, x0: float, y0: float, h:
         w, v = np.linalg.eigh(H)
         if w.min() > 0:
             step = -v @ ((v.T @ grad) / w)
+            # the quadratic model's minimum, less an allowance for what it misses, stays
+            # above the target: no deeper minimum here
+            predicted = g[1, 1] + 0.5 * grad @ step
+            if predicted - 0.25 * h * h * w.max() > target:
+                break
         else:                                   # not convex here: go downhill by one stencil
             step = -grad / max(float(np.linalg.norm(grad)), 1e-300) * h
         length = float(np.linalg.norm(step))

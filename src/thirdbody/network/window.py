@@ -104,6 +104,11 @@ class Lattice:
             out[~known] = self._values[where]
         return out.reshape(i.shape)
 
+    def lower_zero(self, depth: float) -> None:
+        """Move the gap's zero level down by ``depth`` (m): every g₀ grows by it."""
+        self.zero -= float(depth)
+        self._values = self._values + float(depth)
+
     def candidates(self, bound: float) -> tuple[tuple[int, int], np.ndarray]:
         """The cells that may lie below ``bound`` (m) and their neighbours, from the coarse scan
         refined level by level (module docstring): ``((i0, j0), mask)`` with mask[j − j0, i − i0]
