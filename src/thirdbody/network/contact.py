@@ -4,40 +4,42 @@
 Two elastic bodies a and b meet at their closest points (:func:`closest_approach`). In the
 contact frame (z along the common normal n from a to b, origin at the midpoint of the closest
 points, tangent axes tied to the bodies: :func:`~thirdbody.network.frame.pair_frame`) a lies
-below and b above; the gap over the window is
-b's lower surface minus a's upper surface from vertical rays, measured from first touch, over
-every cell that can touch (:mod:`~thirdbody.network.window`). The two bodies are treated as
-elastic half-spaces with the pair's compliance (:meth:`ElasticPair.of`: 1/E* = Σ (1 − ν_i²)/E_i,
-1/G = Σ 1/G_i; Johnson 1985, §4.2 and §7.2): the frame's problem is the one the plate solvers
-solve, with b in the role of the plate. Normal and tangential problems are uncoupled (Goodman's
-approximation: exact for two bodies of the same material, which have Dundurs' β = 0).
+below and b above. The gap is b's lower surface minus a's upper surface along the frame's
+vertical rays, measured from first touch, over every cell that can touch
+(:mod:`~thirdbody.network.window`); several spots share the frame of the deepest one and one
+rigid approach along its normal, as the spots of a plate do. Both bodies are elastic
+half-spaces with the pair's compliance (:meth:`ElasticPair.of`: 1/E* = Σ (1 − ν_i²)/E_i,
+1/G = Σ 1/G_i; Johnson 1985, §4.2 and §7.2): the frame's problem is the plate solvers' problem
+with b in the role of the plate. Normal and tangential problems are uncoupled (Goodman's
+approximation: exact for two bodies of one material, whose Dundurs β is 0).
 
 Sign conventions (every vector in the world frame, SI units):
 
 * the normal force N >= 0 is compressive: b pushes a along −n, a pushes b along +n;
 * the traction τ (frame components on the tangent axes t₁ = F⁻¹x̂, t₂ = F⁻¹ŷ) and the
-  tangential force are what b exerts on a; the force on b is the opposite (Newton's third law,
+  tangential force are what b exerts on a; on b they are the opposite (Newton's third law,
   cell by cell);
 * the shift is the rigid tangential displacement of b relative to a at the contact,
-  accumulated over the contact's history; friction on a points along b's slip over a.
+  accumulated over the contact's history; friction on a points along b's slip over a;
+* the twist is the rotation of b relative to a about n (right-handed), accumulated likewise.
 
 **History across frames.** The tangential problem is incremental (Coulomb's law with history,
-:func:`~thirdbody.bem.solve_tangential`). Between two solves the bodies move, so the normal,
-the contact point and the frame move too. The history is carried in the contact's frame: a
+:func:`~thirdbody.bem.solve_tangential`). Between two solves the bodies move, and with them the
+normal, the contact point and the frame. The history is carried in the contact's frame: a
 field point at p (old frame, relative to the old origin) goes to Rot(φ) p (new frame, relative
-to the new origin), its 2-vector turned by φ, where φ is the angle, in the new frame, of the old
+to the new origin), its 2-vector turned by φ. φ is the angle, in the new frame, of the old
 tangent axes turned about the old normal by the bodies' mean twist (the twist part of each
-body's rotation since the last solve in its swing-twist decomposition about the normal) and
+body's rotation since the last solve, in its swing-twist decomposition about the normal) and
 carried to the new normal by the smallest rotation. So the fields ride along with a rigid
-motion of the whole pair and keep their direction when the bodies roll (a rotation about a
-tangent axis has no twist). Carried are the
-traction (bilinear interpolation between old cells, an exact copy when φ = 0 and the spacing
-is kept), the accumulated shift (turned by φ) and the twist, to which the spin of b relative to
-a about the normal is added; the previous pressure seeds the normal solve. Without a prescribed
-tangential force or shift increment, the step's shift increment is the displacement of b's
-material point at the old contact origin relative to a's, from the bodies' motion. Material
-points that roll through the contact are not tracked (the history stays with the contact
-point), and a contact that opens loses its history (solve without ``previous``).
+motion of the whole pair, and keep their direction when the bodies roll (a rotation about a
+tangent axis has no twist). Carried are the traction (bilinear interpolation between old cells,
+an exact copy when φ = 0 and the spacing is kept), the accumulated shift (turned by φ) and the
+twist, to which the twist of b's rotation less a's is added; the previous pressure seeds the
+normal solve. Without a prescribed tangential force or shift increment, the step's shift
+increment is the displacement of b's material point at the old contact origin relative to
+a's, from the bodies' motion. Material points that roll through the contact are not tracked
+(the history stays with the contact point), and a contact that opens loses its history (solve
+it again without ``previous``).
 
 **Half-space limit.** The model holds while the contact is small against the bodies' radii of
 curvature at the contact. Each result reports the contact radius a = √(A/π) (A: the largest
@@ -75,15 +77,18 @@ from .window import Lattice, carry_field, ring, union, window_around, window_gap
 
 __all__ = ["HALF_SPACE_LIMIT", "HalfSpaceWarning", "PairContact", "solve_contact"]
 
-#: contact radius / smallest radius of curvature beyond which the half-space model is warned
-#: about (notes/pp_contact.md: the BEM force at a given approach departs from Hertz by ...)
+#: contact radius / smallest radius of curvature beyond which a HalfSpaceWarning is emitted.
+#: Two spheres with their exact gap depart from Hertz by about −0.1 (a/R)² in force at a given
+#: approach (−9.6e-4 at a/R = 0.1, −8.9e-3 at 0.3; notes/pp_contact.md), the half-space kernel
+#: neglecting terms of the same order that it cannot compute; 0.1 keeps them near 1e-3.
 HALF_SPACE_LIMIT = 0.1
 
 _ATTEMPTS = 12
 _JOHNSON = ("Johnson, K. L. (1985). Contact Mechanics. Cambridge University Press: §4.2 (two "
             "bodies: relative curvature, 1/E* = Σ(1-ν²)/E), §7.2 (tangential compliance "
-            "Σ(2-ν)/G of two bodies, after Mindlin 1949); Hertz, H. (1882). J. reine angew. "
-            "Math. 92, 156-171.")
+            "Σ(2-ν)/G of two bodies); Hertz, H. (1882). Über die Berührung fester elastischer "
+            "Körper. J. reine angew. Math. 92, 156-171; Mindlin, R. D. (1949). Compliance of "
+            "elastic bodies in contact. J. Appl. Mech. 16, 259-268.")
 
 
 class HalfSpaceWarning(UserWarning):

@@ -8,19 +8,22 @@ closest points. Under an approach δ only cells with g₀ < δ can touch: both b
 displacements are positive under a compressive pressure (every influence coefficient is).
 
 **Every spot.** The common footprint of the two bodies (the intersection of their bounding
-discs) is scanned on a coarse sub-lattice, of stride k = a power of two with k Δ about 1/24 of
-the smaller body's size and a quarter of its feature length. A sample is a candidate when its
-gap less a curvature allowance (half its largest second difference: twice the dip of a
-quadratic between samples) is below the bound β on the approach; the candidates and their
-neighbours are then sampled four times finer, and so on down to the cells. Every connected
+discs) is scanned on a coarse sub-lattice of stride k, the power of two with k Δ at most 1/24
+of the smaller body's size and a quarter of the smaller feature length. A sample is a
+candidate when its gap less a curvature allowance (half its largest second difference: twice
+the dip of a quadratic between samples) is below the bound β on the approach; the candidates
+and their neighbours are then sampled four times finer, and so on down to the cells. Every connected
 piece of {g₀ < β}, wherever it lies, is found this way, and only the neighbourhood of those
-pieces is evaluated cell by cell. Cells left out can not be below β; in the solver's window
-they are +inf.
+pieces is evaluated cell by cell. Cells left out cannot be below β (if the allowance bounds the
+dip, which holds for surfaces smooth on the scale of the samples); in the solver's window they
+are +inf. A faceted mesh's first touch may be a lowest cell below σ: the caller then lowers the
+zero (:meth:`Lattice.lower_zero`).
 
 The window is the bounding box of the cells below β with two free cells on each side (rounded
 up to a multiple of 8 cells, as the plates' windows are). After a solve the caller checks that
 the approach stayed below β and that no cell next to the evaluated ones is below the approach,
-and grows β or the evaluated set otherwise: the window grows with the contact and never cuts it.
+and grows β or the evaluated set otherwise (and the solver's own edge check grows β): the window
+grows with the contact and never cuts it.
 """
 
 from __future__ import annotations
@@ -32,13 +35,11 @@ from scipy import ndimage
 
 from ..particle.interface import Window
 from .frame import gap_in_frame
-from .narrow import allowance, footprint_box
+from .narrow import SCAN_SAMPLES, allowance, footprint_box
 
 __all__ = ["Lattice", "carry_field"]
 
 _ROUND = 8
-#: coarse samples across the smaller body's footprint diameter (at most)
-SCAN_SAMPLES = 48
 _REFINE = 4         # each level is this many times finer than the last
 
 
