@@ -18,8 +18,7 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 import thirdbody as tb
-from _network_shapes import two_bumps
-from test_network_narrow import common_normal, random_pair
+from test_network_narrow import common_normal, random_pair, two_bumps
 from thirdbody.network import Body, HalfSpaceWarning, closest_approach, solve_contact
 from thirdbody.particle import count_spots
 from thirdbody.shapes import Ellipsoid, MeshShape, Potato, Sphere

@@ -15,11 +15,17 @@ from scipy.optimize import least_squares, minimize
 from scipy.spatial.transform import Rotation
 
 import thirdbody as tb
-from _network_shapes import two_bumps
 from thirdbody.network import Body, closest_approach, contact_frame
-from thirdbody.shapes import Ellipsoid, MeshShape, Potato, Sphere
+from thirdbody.shapes import Ellipsoid, MeshShape, Potato, Sphere, Wave
 
 MAT = tb.Material(1e9, 0.3)
+
+
+def two_bumps() -> Potato:
+    """An ellipsoid (1, 0.6, 0.6) mm whose radius is modulated by 1 − 0.12 cos(2π d_x): two
+    equal bumps on its upper (and lower) side at body x ≈ ±0.3 mm, 0.64 mm high, with a dip to
+    0.53 mm between them. Symmetric in x, y and z, so its centroid is the wave centre."""
+    return Potato((1e-3, 0.6e-3, 0.6e-3), [Wave(0.12, 2 * np.pi, 0.0, -np.pi / 2)])
 
 
 def ellipsoid_point(axes, R, c, u, v):

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 import thirdbody as tb
 import thirdbody.network.contact as contact_module
 import thirdbody.network.window as window_module
-from _network_shapes import two_bumps
+from test_network_narrow import two_bumps
 from thirdbody.network import Body, closest_approach, solve_contact
 from thirdbody.network.frame import pair_frame
 from thirdbody.network.window import Lattice, carry_field
