@@ -562,6 +562,12 @@ def test_the_share_of_a_turning_particle_balances_the_others_compliance():
         assert ev.force > 0
         rest = sum(hertz(t, ev.gap) for t in tops)
         assert abs(ev.force + rest - total) <= 1e-9 * total, (tops, ev.force, rest)
+        # with twins: n identical particles turning alike, each carrying F_i
+        for n in (2, 3):
+            ev = share_while_turning(member, rotation, total, [spring(t) for t in tops],
+                                     guess, twins=n)
+            rest = sum(hertz(t, ev.gap) for t in tops)
+            assert abs(n * ev.force + rest - total) <= 1e-9 * total, (n, tops, ev.force)
     # the others alone carry F_N with the plates above this particle's top: unloaded
     high = reach + 1e-3
     ev = share_while_turning(member, rotation, total, [spring(high)], 1.0)
@@ -663,3 +669,35 @@ def test_a_sphere_that_would_carry_less_than_a_millionth_is_unloaded_and_the_res
     assert math.isclose(F.sum(), total, rel_tol=1e-12)
     _, expected = hertz_sum(big, SOFT.E_star, total)
     np.testing.assert_allclose(F[:2], expected, rtol=0.01)
+
+
+@pytest.mark.parametrize("n", [2, 4])
+def test_identical_particles_turn_together_as_one_alone_at_its_share(n):
+    """Identical tilted ellipsoids (1 × 0.6 × 0.5 mm, 35°, μ = 0.1) in a regular array: each
+    needs far more friction than the plates give, so all turn in the first step. They turn
+    alike (twins), each equal to the particle alone at F_N/n: the same tilt in every step and
+    a share of exactly 1/n. (Turning each against the others as they were at the round's
+    start, they undid each other's turns and the layer never settled.)"""
+    particle = tb.Particle(Ellipsoid((1.0e-3, 0.6e-3, 0.5e-3)), SOFT, 35.0)
+    spots = [(0.0, 0.0), (6e-3, 0.0), (0.0, 6e-3), (6e-3, 6e-3)][:n]
+    layer = tb.Layer([tb.PlacedParticle(particle, xy) for xy in spots])
+    total = 0.4 * n
+    sim = tb.Simulation(layer, tb.Plates(0.1), tb.LinearRamp(stop=total, steps=2),
+                        resolution=40, maps_every=0)
+    ds = quiet_run(sim)
+    assert sim.status == "complete"
+    alone = tb.particle_view(quiet_run(tb.Simulation(
+        particle, tb.Plates(0.1), tb.LinearRamp(stop=total / n, steps=2), resolution=40,
+        maps_every=0)))
+    assert alone.turned.values.tolist()[0] == 1 and ds.turned.values[0].all()
+    assert np.array_equal(ds.load_share.values, np.full((2, n), 1.0 / n))
+    tilt = ds.orientation.sel(component="y").values
+    for i in range(n):
+        np.testing.assert_allclose(tilt[:, i], alone.orientation.sel(component="y").values,
+                                   atol=0.01)
+        np.testing.assert_allclose(ds.normal_force.values[:, i], alone.normal_force.values,
+                                   rtol=1e-9)
+    assert np.array_equal(ds.state.values, np.repeat(alone.state.values[:, None], n, axis=1))
+    # the same turn: the same orientations evaluated, at the share of the particle alone
+    assert np.array_equal(ds.turn_evaluations.values,
+                          np.repeat(alone.turn_evaluations.values[:, None], n, axis=1))

@@ -29,6 +29,7 @@ are SI; angles in the results are degrees.
 
 from __future__ import annotations
 
+import copy
 import math
 import time
 import warnings
@@ -380,42 +381,77 @@ class Simulation:
             record.error = self._clearance(state, evs)
         return record, (maps if want_maps else None)
 
+    def _twins(self, unstable: list[int], evs) -> list[list[int]]:
+        """The unstable particles in groups of twins: the same shape, material and cells, at the
+        same orientation under the same load and couple (equal bit for bit). Twins turn alike,
+        so each group turns once, its members together (a regular array of identical grains
+        would otherwise turn in lockstep against each other as they were at the round's
+        start, and undo each other's turns for ever). Groups are in order of their first
+        member; every other particle is a group of one."""
+        groups: dict[tuple, list[int]] = {}
+        for i in unstable:
+            m, ev = self.members[i], evs[i]
+            twin = (repr(m.particle.shape), m.particle.material, m.cell_size,
+                    key(ev.rotation), ev.force, ev.gap, tuple(ev.demand_force))
+            groups.setdefault(twin, []).append(i)
+        return list(groups.values())
+
     def _turns(self, unstable: list[int], step: LoadStep, state: LayerState, evs, kinds,
                balanced, counts, settled) -> set[int]:
         """Turn every particle of ``unstable`` to its first stable orientation, each with the
         others held as they were at the start of the round (so the order does not matter, and
-        the turns can run in parallel processes); integrate their kinematics. Returns the
-        particles that lost their load on the way (a layer): each stops where it last touched
-        and carries nothing for the rest of the step (its share there vanishes with the
+        the turns can run in parallel processes), twins (:meth:`_twins`) together: their
+        share follows from F_i · (twins) + Σ others = F_N; integrate their kinematics. Returns
+        the particles that lost their load on the way (a layer): each stops where it last
+        touched and carries nothing for the rest of the step (its share there vanishes with the
         bisection tolerance; the others take it)."""
         members = self.members
         for i in unstable:
             if kinds[i] is RigidState.STICK:
                 kinds[i] = self._classify(evs[i])
+        groups = self._twins(unstable, evs)
         held = None
         if step.kind == "force" and len(members) > 1:
             held = [m.compliance(s.rotation) for m, s in zip(members, state.particles,
                                                              strict=True)]
-        tasks = [(self._settings, members[i], evs[i], state.particles[i], step,
-                  None if held is None else [c for j, c in enumerate(held) if j != i])
-                 for i in unstable]
+        before = {g[0]: (state.particles[g[0]].position.copy(),
+                         state.particles[g[0]].slip_up.copy(),
+                         state.particles[g[0]].slip_low.copy()) for g in groups}
+        tasks = [(self._settings, members[g[0]], evs[g[0]], state.particles[g[0]], step,
+                  None if held is None else [c for j, c in enumerate(held) if j not in g],
+                  len(g))
+                 for g in groups]
         if self._pool is not None and len(tasks) > 1:
             results = list(self._pool.map(turn_task, tasks))
         else:
             results = [turn_particle(*task) for task in tasks]
         lost = set()
-        for i, (particle, turn, times) in zip(unstable, results, strict=True):
-            state.particles[i] = particle
-            members[i].bind(particle.warm)
-            if self._pool is not None and len(tasks) > 1:   # solved in another process
-                members[i].statics.add_time(*times)
-            evs[i] = turn.final
-            balanced[i] = turn.balanced
-            counts[i] = turn.evaluations if counts[i] <= 1 else counts[i] + turn.evaluations
-            if turn.balanced and not turn.lost_load:
-                settled[i] = key(turn.final.rotation)       # a balance of the couple
-            if turn.lost_load and len(members) > 1:
-                lost.add(i)
+        for group, (particle, turn, times) in zip(groups, results, strict=True):
+            first = group[0]
+            moved = [new - old for new, old in zip((particle.position, particle.slip_up,
+                                                    particle.slip_low), before[first],
+                                                   strict=True)]
+            for i in group:
+                if i == first:
+                    state.particles[i] = particle
+                else:
+                    twin = state.particles[i]
+                    twin.rotation = particle.rotation
+                    twin.position = twin.position + moved[0]
+                    twin.slip_up = twin.slip_up + moved[1]
+                    twin.slip_low = twin.slip_low + moved[2]
+                    twin.history.clear()
+                    twin.warm = copy.deepcopy(particle.warm)
+                members[i].bind(state.particles[i].warm)
+                if self._pool is not None and len(tasks) > 1 and i == first:
+                    members[i].statics.add_time(*times)     # solved in another process
+                evs[i] = turn.final
+                balanced[i] = turn.balanced
+                counts[i] = turn.evaluations if counts[i] <= 1 else counts[i] + turn.evaluations
+                if turn.balanced and not turn.lost_load:
+                    settled[i] = key(turn.final.rotation)       # a balance of the couple
+                if turn.lost_load and len(members) > 1:
+                    lost.add(i)
         return lost
 
     def _clearance(self, state: LayerState, evs) -> str | None:

@@ -51,10 +51,11 @@ class Compliance:
 
 
 def share_while_turning(m, rotation, total: float, others: list[Compliance],
-                        guess: float) -> Evaluation:
+                        guess: float, twins: int = 1) -> Evaluation:
     """A particle at ``rotation`` under force control, the others held: its share F_i with
-    F_i + Σ_j F_j(h_i) = ``total``, the others' forces from their compliance models, by
-    Illinois iterations on F_i in [0, total] (the residual grows with F_i). Unloaded
+    n F_i + Σ_j F_j(h_i) = ``total`` (n = ``twins``: identical particles at the same
+    orientation, each carrying F_i), the others' forces from their compliance models, by
+    Illinois iterations on F_i in [0, total/n] (the residual grows with F_i). Unloaded
     (:meth:`Evaluation.unloaded`) when the others alone hold the plates above its top."""
 
     def rest(gap: float) -> float:
@@ -65,12 +66,13 @@ def share_while_turning(m, rotation, total: float, others: list[Compliance],
     if lo_r >= 0:
         return Evaluation.unloaded(rotation)
     hi_f = hi_r = None
-    F = min(max(guess, 1e-3 * total), total)
+    cap = total / twins
+    F = min(max(guess, 1e-3 * cap), cap)
     best = None
     side = 0
     for _ in range(40):
         ev = m.at_force(rotation, F)
-        r = F + rest(ev.gap) - total
+        r = twins * F + rest(ev.gap) - total
         best = ev
         if abs(r) <= 1e-9 * total:
             break
@@ -85,7 +87,7 @@ def share_while_turning(m, rotation, total: float, others: list[Compliance],
                 hi_r *= 0.5
             side = -1
         if hi_f is None:
-            F = min(2.0 * F, total)
+            F = min(2.0 * F, cap)
         else:
             F = lo_f - lo_r * (hi_f - lo_f) / (hi_r - lo_r)
             if not lo_f < F < hi_f:

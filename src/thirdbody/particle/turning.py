@@ -321,12 +321,14 @@ class TurnSettings:
 
 
 def turn_particle(settings: TurnSettings, member, ev: Evaluation, particle, step,
-                  others: list[Compliance] | None):
+                  others: list[Compliance] | None, twins: int = 1):
     """Turn one particle from ``ev`` to its first stable orientation (or until it loses its
     load) and integrate its kinematics: at its share under force control (``others``: the
     other particles' compliance, held; None for a particle alone), at the plate gap under gap
     control. ``member`` is the particle's :class:`~thirdbody.particle.member.Member`,
-    ``particle`` its :class:`~thirdbody.state.ParticleState`, updated in place.
+    ``particle`` its :class:`~thirdbody.state.ParticleState`, updated in place; ``twins``:
+    the number of identical particles turning alike with it (its share F_i then follows from
+    ``twins`` · F_i + Σ others = F_N).
 
     Returns (the particle's state, the :class:`Turn` without its path, the wall time of its
     normal solves and of its geometry, s): what a worker process sends back."""
@@ -349,7 +351,7 @@ def turn_particle(settings: TurnSettings, member, ev: Evaluation, particle, step
         guess = [ev.force]
 
         def evaluate(r):
-            out = share_while_turning(m, r, step.value, others, guess[0])
+            out = share_while_turning(m, r, step.value, others, guess[0], twins)
             if out.force > 0:
                 guess[0] = out.force
             return out
