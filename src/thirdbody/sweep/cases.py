@@ -54,7 +54,7 @@ _KEPT_ATTRS = ("units", "long_name", "flag_values", "flag_meanings")
 
 def _read_case(path: Path, names: Iterable[str]) -> _CaseData | None:
     """Read a case file's status and the per-step variables ``names`` straight through h5py
-    (ten times faster than xarray for the summary). None if there is no file; an unreadable
+    (faster than xarray, and the summary reads every case). None if there is no file; an unreadable
     file raises :class:`UnreadableCase` and is left as it is."""
     import h5py
 

@@ -83,10 +83,10 @@ def run_case(data: dict, base_dir: str, cases_dir: str, case_id: str, *,
         return {**record, "status": message, "elapsed": time.perf_counter() - start}
 
 
-#: Dask settings of the LocalCluster's workers, measured on the Fig. 4 sweep: without dask's
-#: ``MALLOC_TRIM_THRESHOLD_`` (see :func:`_relax_malloc_trim`) cases run 20-40 % faster, and
-#: without the statistical profiler (a stack sample every 10 ms) another 10-20 %. Start the
-#: workers of your own cluster with the same (README).
+#: Dask settings of the LocalCluster's workers: without dask's ``MALLOC_TRIM_THRESHOLD_`` (see
+#: :func:`_relax_malloc_trim`) and without the statistical profiler (a stack sample every
+#: 10 ms) cases run faster (measured in the docs' performance page). Start the workers of your
+#: own cluster with the same (docs: sweeps).
 LOCAL_WORKER_CONFIG = {"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
                        "distributed.worker.profile.enabled": False}
 
@@ -97,7 +97,7 @@ def _relax_malloc_trim() -> None:
     """Undo, in this worker process, the ``MALLOC_TRIM_THRESHOLD_`` that dask's nanny sets.
 
     That variable freezes glibc's adaptive mmap threshold, so every FFT-sized temporary array
-    (> 128 KiB) is mmap'ed and page-faulted afresh: measured here, 20-40 % slower cases. The
+    (> 128 KiB) is mmap'ed and page-faulted afresh, which slows the cases down. The
     LocalCluster this module starts does not set it; in workers of other clusters this raises
     the mmap and trim thresholds with ``mallopt`` (glibc only; elsewhere nothing happens).
     """
