@@ -18,7 +18,7 @@ import xarray as xr
 from typer.testing import CliRunner
 
 import thirdbody as tb
-from thirdbody.cli import LOCK_NAME
+from thirdbody.cli.lock import LOCK_NAME
 from thirdbody.io import open_results, parse_config
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,7 +19,7 @@ import xarray as xr
 
 import thirdbody.io.results as results
 from test_results_append import layer_sim, potato_sim, steps_on_disk, stop_after
-from thirdbody.cli import LOCK_NAME
+from thirdbody.cli.lock import LOCK_NAME
 from thirdbody.io import open_results, run_to_file
 
 
@@ -96,10 +96,10 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
         os.environ["PYTHONPATH"] = {TESTS!r}
         from _faulty_writers import SlowWriter
         from test_results_append import potato_sim
-        from thirdbody.cli import _lock
+        from thirdbody.cli.lock import lock
         from thirdbody.io import results, run_to_file
 
-        lock = _lock(Path({str(out)!r}))
+        held = lock(Path({str(out)!r}))
 
         results._StepWriter = SlowWriter    # the child lags: steps wait in the pipe
         made = []
@@ -120,7 +120,7 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
 
         try:
             run_to_file(potato_sim(steps=8), {str(path)!r}, progress=progress,
-                        background=True, keep_fds=(lock.fileno(),))
+                        background=True, keep_fds=(held.fileno(),))
         except KeyboardInterrupt:
             sys.exit(130)
     """)
