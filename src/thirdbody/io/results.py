@@ -172,6 +172,7 @@ class _StepWriter:
                      unlimited_dims=[d for d in _GROWING if d in ds.dims],
                      encoding={name: {"chunksizes": _chunks(var)}
                                for name, var in ds.variables.items() if var.dims})
+        _bound_scales(self.tmp)
         os.replace(self.tmp, self.path)
         self.whole += 1
 
@@ -501,6 +502,42 @@ def _regrid(f, tail, old: tuple[int, int, int, int], new: tuple[int, int, int, i
         d = f[dim]
         d.resize(tail.sizes[dim], axis=0)
         d[...] = tail[dim].values
+
+
+#: the length up to which a growing dimension's scale can be extended (see _bound_scales)
+_MAX_ROWS = 1 << 40
+
+
+def _bound_scales(path: Path) -> None:
+    """Give the scale of each growing dimension in the file ``path`` a finite maximum length
+    instead of an unlimited one; the variables along it stay unlimited.
+
+    Why: for an unlimited dimension, h5netcdf finds the length by dereferencing every
+    variable along it, and it does so each time it asks a variable for its shape, so that
+    xarray's opening costs (variables along ``step``)² dereferences: 2-10 s for an unfinished
+    results file against a few tens of ms for h5netcdf to read the step count. A bounded
+    scale's length is its own, read at once; appending extends it with the variables."""
+    import h5py
+
+    with h5py.File(path, "r+") as f:
+        for dim in _GROWING:
+            if dim not in f or f[dim].maxshape != (None,):
+                continue
+            old = f[dim]
+            attached = [(f[ref], int(axis)) for ref, axis in old.attrs.get("REFERENCE_LIST", [])]
+            for var, axis in attached:
+                var.dims[axis].detach_scale(old)
+            name = old.attrs["NAME"]
+            attrs = [(k, old.attrs[k], old.attrs.get_id(k).dtype) for k in old.attrs
+                     if k not in ("CLASS", "NAME", "REFERENCE_LIST")]
+            data, chunks = old[...], old.chunks
+            del f[dim]
+            new = f.create_dataset(dim, data=data, maxshape=(_MAX_ROWS,), chunks=chunks)
+            new.make_scale(name.decode("ascii") if isinstance(name, bytes) else str(name))
+            for k, value, dtype in attrs:
+                new.attrs.create(k, value, dtype=dtype)
+            for var, axis in attached:
+                var.dims[axis].attach_scale(new)
 
 
 def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = None) -> None:
