@@ -97,6 +97,7 @@ def test_a_second_run_into_a_locked_directory_names_the_holder(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [LOCK_NAME]      # nothing else written
     code, text = _cli("run", str(config), "-o", str(out), "--no-plots")
     assert code == 0, text                                        # released: it runs
+    assert not (out / LOCK_NAME).exists()                         # and removed at its end
 
 def _dead_pid() -> int:
     proc = subprocess.Popen([sys.executable, "-c", "pass"])
@@ -127,3 +128,48 @@ def test_a_lock_held_for_a_killed_run_is_waited_for(tmp_path):
     _, stderr = run.communicate(timeout=120)
     assert run.returncode == 0, stderr
     assert (out / "results.nc").exists()
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_a_crashed_runs_stale_lock_is_taken_over_and_removed(tmp_path):
+    """A killed run leaves its lock file, naming a dead pid, held by nobody: the next run
+    takes it over, and removes it when it ends."""
+    config = tmp_path / "c.toml"
+    config.write_text(SMALL)
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / LOCK_NAME).write_text(f"{_dead_pid()}\n")
+    code, text = _cli("run", str(config), "-o", str(out), "--no-plots")
+    assert code == 0, text
+    assert "waiting" not in text
+    assert not (out / LOCK_NAME).exists()
+
+
+def test_a_lock_file_removed_as_another_run_opens_it_is_not_shared(tmp_path, monkeypatch):
+    """The run holding the lock ends (and removes the file) between a second run's open and
+    its lock: the second run must lock the file now at the path, so that a third is still
+    refused. Without the check it would hold a lock on the removed file, and the third run
+    would create a new one and run too."""
+    import typer
+
+    from thirdbody.cli import lock as lock_module
+
+    first = lock_module.lock(tmp_path)
+    flock, ended = fcntl.flock, []
+
+    def first_ends_now(handle, operation):
+        if not ended:
+            ended.append(True)
+            lock_module.unlock(tmp_path, first)
+        return flock(handle, operation)
+
+    monkeypatch.setattr(fcntl, "flock", first_ends_now)
+    second = lock_module.lock(tmp_path)
+    monkeypatch.setattr(fcntl, "flock", flock)
+    assert ended
+    assert os.fstat(second.fileno()).st_ino == os.stat(tmp_path / LOCK_NAME).st_ino
+    with pytest.raises(typer.Exit) as refused:
+        lock_module.lock(tmp_path)
+    assert refused.value.exit_code == 2
+    lock_module.unlock(tmp_path, second)
+    assert not (tmp_path / LOCK_NAME).exists()

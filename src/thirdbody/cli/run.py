@@ -11,7 +11,7 @@ import typer
 
 from .errors import fail
 from .interrupts import defer_interrupts, interruptible
-from .lock import lock
+from .lock import lock, unlock
 
 
 def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
@@ -147,44 +147,47 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         fail(f"-o {out}: cannot create it: {exc.strerror}")
-    held = lock(out)  # held until the process exits (and by the child saving the results)
-    if not resume:
-        if results.exists():            # written by a run that held the lock before us
-            fail(f"{results} exists: use --resume to continue it, or another --out")
-        (out / "config.toml").write_text(cfg.to_toml())
-    n = len(sim.schedule)
-    start = time.perf_counter()
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
+    held = lock(out)  # held until the run ends (and by the child saving the results)
+    try:
+        if not resume:
+            if results.exists():            # written by a run that held the lock before us
+                fail(f"{results} exists: use --resume to continue it, or another --out")
+            (out / "config.toml").write_text(cfg.to_toml())
+        n = len(sim.schedule)
+        start = time.perf_counter()
+        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
 
-    with Progress(TextColumn("{task.description}"), BarColumn(),
-                  TextColumn("{task.completed}/{task.total}"), TimeRemainingColumn(),
-                  transient=False) as bar:
-        task = bar.add_task("starting", total=n)
+        with Progress(TextColumn("{task.description}"), BarColumn(),
+                      TextColumn("{task.completed}/{task.total}"), TimeRemainingColumn(),
+                      transient=False) as bar:
+            task = bar.add_task("starting", total=n)
 
-        def progress(r) -> None:
-            bar.update(task, completed=r.step + 1, description=str(r))
+            def progress(r) -> None:
+                bar.update(task, completed=r.step + 1, description=str(r))
 
-        try:
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore", SimulationStoppedWarning)
-                ds = run_to_file(sim, results, resume=resume, progress=progress,
-                                 attrs={"config": cfg.to_toml()}, background=True,
-                                 keep_fds=(held.fileno(),))
-        except (FileNotFoundError, ValueError) as exc:
-            fail(str(exc))
-    elapsed = time.perf_counter() - start
-    steps = ds.sizes.get("step", 0)
-    # results.nc is final: from here on Ctrl-C lets the figures finish (an interrupt in the
-    # middle of matplotlib's or pandas' imports broke them with a traceback), then exits 130
-    interrupted = defer_interrupts()
-    if plots and steps:
-        from ..plot import save_all
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", SimulationStoppedWarning)
+                    ds = run_to_file(sim, results, resume=resume, progress=progress,
+                                     attrs={"config": cfg.to_toml()}, background=True,
+                                     keep_fds=(held.fileno(),))
+            except (FileNotFoundError, ValueError) as exc:
+                fail(str(exc))
+        elapsed = time.perf_counter() - start
+        steps = ds.sizes.get("step", 0)
+        # results.nc is final: from here on Ctrl-C lets the figures finish (an interrupt in the
+        # middle of matplotlib's or pandas' imports broke them with a traceback), then exits 130
+        interrupted = defer_interrupts()
+        if plots and steps:
+            from ..plot import save_all
 
-        save_all(ds, out)
-    typer.echo(f"{sim.status}: {steps} of {n} steps in {elapsed:.1f} s -> {results}")
-    if interrupted:
-        typer.echo(f"\ninterrupted at the end: {results} holds {steps} completed step(s), "
-                   "the whole run", err=True)
-        raise typer.Exit(130)
-    if sim.status != "complete":
-        raise typer.Exit(1)
+            save_all(ds, out)
+        typer.echo(f"{sim.status}: {steps} of {n} steps in {elapsed:.1f} s -> {results}")
+        if interrupted:
+            typer.echo(f"\ninterrupted at the end: {results} holds {steps} completed step(s), "
+                       "the whole run", err=True)
+            raise typer.Exit(130)
+        if sim.status != "complete":
+            raise typer.Exit(1)
+    finally:
+        unlock(out, held)
