@@ -322,6 +322,9 @@ base = "base.toml"
                                  client.scheduler.address, "--no-plots"])
     assert result.exit_code == 0, result.output
     assert "1 cases: 1 run, 0 already done, 0 not complete" in result.output
+    # no terminal here: a plain line for the case, then what comes next
+    assert "[1/1] case " in result.output and "elapsed" in result.output
+    assert "writing the summary\n" in result.output
     assert client.run(os.getpid) == before          # same workers, still running
     s = open_results(tmp_path / "out" / "summary.nc")
     assert BEHAVIOURS[int(s.behaviour.sel(orientation_deg=35.0))] == "stick"

@@ -9,10 +9,12 @@ from typing import Annotated
 
 import typer
 
+from . import _help
 from .errors import fail
 
-app = typer.Typer(help="The bundled example configurations (the paper's Figs. 3-5).",
-                  invoke_without_command=True)
+app = typer.Typer(help="The bundled examples: the paper's figures, a mesh grain, a layer and a "
+                       "sweep (listed without a command; `copy` one to edit it).",
+                  invoke_without_command=True, cls=_help.Group)
 
 
 def bundled() -> dict[str, Path]:
@@ -38,7 +40,7 @@ def examples(ctx: typer.Context) -> None:
             typer.echo(f"{name:12s} {first}")
 
 
-@app.command("copy")
+@app.command("copy", cls=_help.Command)
 def copy(name: Annotated[str, typer.Argument(help="example name")],
          directory: Annotated[Path, typer.Argument(help="where to copy it")]) -> None:
     """Copy an example configuration so you can edit it."""

@@ -16,6 +16,8 @@ def plot(results: Annotated[Path, typer.Argument(
         help="a results.nc file, or a sweep's summary.nc")],
          out: Annotated[Path | None, typer.Option("-o", "--out",
                                                   help="directory (default: next to it)")] = None,
+         quiet: Annotated[bool, typer.Option(
+             "--quiet", "-q", help="do not list the files written")] = False,
          ) -> None:
     """Redraw every figure from a results file (or the state map from a sweep summary)."""
     from ..plot import save_all
@@ -31,7 +33,7 @@ def plot(results: Annotated[Path, typer.Argument(
         written = save_state_map(ds, out or results.parent)
     else:
         written = save_all(ds, out or results.parent)
-    for path in written:
+    for path in [] if quiet else written:
         typer.echo(str(path))
 
 

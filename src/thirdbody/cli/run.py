@@ -12,6 +12,7 @@ import typer
 from .errors import fail
 from .interrupts import defer_interrupts, interruptible
 from .lock import lock, unlock
+from .progress import Progress, step_text
 
 
 def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
@@ -20,8 +21,13 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
         print_config: Annotated[bool, typer.Option(
             "--print-config", help="print the resolved configuration and exit")] = False,
         plots: Annotated[bool, typer.Option(help="write the figures at the end")] = True,
+        quiet: Annotated[bool, typer.Option(
+            "--quiet", "-q", help="print nothing but errors (exit codes unchanged)")] = False,
         ) -> None:
-    """Run a simulation: OUT/results.nc (written after every step), OUT/config.toml, figures."""
+    """Run a simulation: OUT/results.nc (written after every step), OUT/config.toml, figures.
+
+    In a terminal a progress bar; otherwise (a log file, a pipe) a line per step, at most one
+    every 10 s, with the time elapsed and left."""
     # the imports first, while Ctrl-C still ends the process quietly: a KeyboardInterrupt in
     # the middle of rich's imports ended it with SIGINT after the handler below had run
     import rich.progress  # noqa: F401
@@ -31,7 +37,7 @@ def run(config: Annotated[Path, typer.Argument(help="TOML configuration file")],
     interruptible()
     results = out / "results.nc"
     try:
-        _run(config, out, results, resume, print_config, plots)
+        _run(config, out, results, resume, print_config, plots, quiet)
     except KeyboardInterrupt:
         results.with_name(results.name + ".tmp").unlink(missing_ok=True)
         done, finished = _steps_on_disk(results)
@@ -112,7 +118,7 @@ def _steps_on_disk(results: Path) -> tuple[int, bool]:
 
 
 def _run(config: Path, out: Path, results: Path, resume: bool, print_config: bool,
-         plots: bool) -> None:
+         plots: bool, quiet: bool) -> None:
     import warnings
 
     from ..io import ConfigError, load_config, run_to_file
@@ -155,20 +161,12 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
             (out / "config.toml").write_text(cfg.to_toml())
         n = len(sim.schedule)
         start = time.perf_counter()
-        from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
-        with Progress(TextColumn("{task.description}"), BarColumn(),
-                      TextColumn("{task.completed}/{task.total}"), TimeRemainingColumn(),
-                      transient=False) as bar:
-            task = bar.add_task("starting", total=n)
-
-            def progress(r) -> None:
-                bar.update(task, completed=r.step + 1, description=str(r))
-
+        with Progress(n, "steps", quiet) as shown:
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", SimulationStoppedWarning)
-                    ds = run_to_file(sim, results, resume=resume, progress=progress,
+                    ds = run_to_file(sim, results, resume=resume,
+                                     progress=lambda r: shown.update(r.step + 1, step_text(r)),
                                      attrs={"config": cfg.to_toml()}, background=True,
                                      keep_fds=(held.fileno(),))
             except (FileNotFoundError, ValueError) as exc:
@@ -181,8 +179,10 @@ def _run(config: Path, out: Path, results: Path, resume: bool, print_config: boo
         if plots and steps:
             from ..plot import save_all
 
+            shown.note(f"drawing the figures in {out}")
             save_all(ds, out)
-        typer.echo(f"{sim.status}: {steps} of {n} steps in {elapsed:.1f} s -> {results}")
+        if not quiet:
+            typer.echo(f"{sim.status}: {steps} of {n} steps in {elapsed:.1f} s -> {results}")
         if interrupted:
             typer.echo(f"\ninterrupted at the end: {results} holds {steps} completed step(s), "
                        "the whole run", err=True)

@@ -10,6 +10,7 @@ import typer
 
 from .errors import fail
 from .interrupts import interruptible
+from .progress import Progress
 
 
 def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base + axes)")],
@@ -28,9 +29,15 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
               min=0.1, help="seconds to wait for --scheduler before giving up")] = 30.0,
           max_cases: Annotated[int, typer.Option(
               "--max-cases", min=1, help="refuse a sweep of more cases than this")] = 1000,
+          quiet: Annotated[bool, typer.Option(
+              "--quiet", "-q", help="print nothing but errors (exit codes unchanged)")] = False,
           ) -> None:
     """Run the Cartesian product of a sweep on dask.distributed: OUT/cases/<hash>.nc per case,
-    OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases."""
+    OUT/summary.nc, OUT/summary.csv and OUT/state_map.png. A rerun skips finished cases.
+
+    In a terminal a progress bar; otherwise (a log file, a pipe) a line per case, at most one
+    every 10 s (every case that did not complete has its line), with the time elapsed and
+    left."""
     interruptible()
     import warnings
 
@@ -46,7 +53,12 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
         fail(str(exc))
     # the size and a rough cost at once, before any case is built
     count = math.prod(spec.shape)
-    typer.echo(f"{count} cases ({' x '.join(str(n) for n in spec.shape) or '1'}); "
+
+    def say(text: str) -> None:
+        if not quiet:
+            typer.echo(text)
+
+    say(f"{count} cases ({' x '.join(str(n) for n in spec.shape) or '1'}); "
                f"{spec.cost_estimate()}")
     if count > max_cases:
         fail(f"{count} cases exceed --max-cases {max_cases}; pass --max-cases {count} to "
@@ -64,20 +76,18 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
                        + f"  {done}")
         typer.echo(f"{len(cases)} cases ({' x '.join(str(n) for n in spec.shape)})")
         return
-    from rich.progress import BarColumn, Progress, TextColumn, TimeRemainingColumn
-
     failed = 0
-    with Progress(TextColumn("{task.description}"), BarColumn(),
-                  TextColumn("{task.completed}/{task.total} cases"), TimeRemainingColumn(),
-                  transient=False) as bar:
-        task = bar.add_task("starting the cluster", total=len(cases))
+    with Progress(len(cases), "cases", quiet) as shown:
+        shown.note("starting the cluster" if scheduler is None else f"connecting to {scheduler}")
 
         def progress(record: dict, done: int, total: int) -> None:
             nonlocal failed
             failed += record["status"] != "complete"
             what = "skipped (done)" if record.get("skipped") else record["status"][:40]
-            bar.update(task, completed=done, description=(
-                f"{record['case']}: {what}; {failed} not complete"))
+            shown.update(done, f"case {record['case']}: {what}; {failed} not complete",
+                         always=record["status"] != "complete")
+            if done == total:
+                shown.note("writing the summary" + (" and the state map" if plots else ""))
 
         try:
             with warnings.catch_warnings():
@@ -92,7 +102,7 @@ def sweep(sweep_file: Annotated[Path, typer.Argument(help="sweep TOML file (base
         except OSError as exc:
             fail(f"cannot reach the Dask scheduler {scheduler}: {exc}" if scheduler
                  else str(exc))
-    typer.echo(f"{len(cases)} cases: {report.computed} run, {report.skipped} already done, "
+    say(f"{len(cases)} cases: {report.computed} run, {report.skipped} already done, "
                f"{len(report.failures)} not complete, in {report.elapsed:.1f} s -> "
                f"{out / 'summary.nc'}")
     for case, status in report.failures.items():
