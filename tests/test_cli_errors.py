@@ -45,14 +45,17 @@ def test_bad_values_are_refused_at_once_naming_the_key(tmp_path, old, new, key):
     assert not (tmp_path / "out").exists()
 
 @pytest.mark.parametrize("name, text", [("shape.py", "print(1)\n"),
-                                        ("shape.step", "ISO-10303-21;\n")])
+                                        ("shape.step", "ISO-10303-21;\n"),
+                                        ("garbage.stl", "garbage \udcff\n"),
+                                        ("garbage.obj", "not a mesh\n")])
 def test_a_mesh_trimesh_cannot_read_is_refused(tmp_path, name, text):
-    (tmp_path / name).write_text(text)
+    (tmp_path / name).write_text(text, errors="surrogateescape")
     grain = (ROOT / "src/thirdbody/examples/grain.toml").read_text()
     config = tmp_path / "g.toml"
     config.write_text(grain.replace('file = "grain.stl"', f'file = "{name}"'))
     code, out = _cli("run", str(config), "-o", str(tmp_path / "out"))
-    _refused(code, out, name, "readable formats")
+    _refused(code, out, name, "is not a readable", "readable formats: STL")
+    assert "Error" not in out                   # no exception's name (ModuleNotFoundError...)
     assert not (tmp_path / "out").exists()
 
 def test_plot_refuses_a_netcdf_file_thirdbody_did_not_write(tmp_path):
