@@ -251,8 +251,8 @@ def _fastest(open_once, repeat=5) -> float:
 
 
 def test_an_unfinished_file_opens_as_fast_as_a_finished_one(tmp_path):
-    """xarray opens an unfinished results file (growing dimensions) as fast as the same steps
-    written whole, and within a small multiple of h5netcdf reading its step count. Before, the
+    """xarray opens an unfinished results file (growing dimensions) about as fast as the same
+    steps written whole, and within a small multiple of h5netcdf reading its step count. Before, the
     growing dimensions were unlimited, and h5netcdf found their length by dereferencing every
     variable along them for every variable it opened: 40-100 times the step count's time."""
     import h5netcdf
@@ -274,6 +274,7 @@ def test_an_unfinished_file_opens_as_fast_as_a_finished_one(tmp_path):
 
     opened(path)()                      # the imports
     step_count = _fastest(count)
-    unfinished, finished = _fastest(opened(path)), _fastest(opened(whole))
-    assert unfinished < 2 * finished, (unfinished, finished)
+    unfinished, finished = _fastest(opened(path), 7), _fastest(opened(whole), 7)
+    # about 1x on a quiet machine, up to 2x measured under load; 7.5x before the fix
+    assert unfinished < 3 * finished, (unfinished, finished)
     assert unfinished < 40 * step_count, (unfinished, step_count)
