@@ -21,3 +21,14 @@ class FullDiskWriter(results._StepWriter):
         if len(sim.records) == 3:
             raise OSError(28, "No space left on device")
         return super()._append(sim, *args)
+
+
+class GatedWriter(results._StepWriter):
+    """Saves nothing until the file named by $THIRDBODY_TEST_GATE exists."""
+
+    def save(self, sim, blob):
+        import os
+
+        while not os.path.exists(os.environ["THIRDBODY_TEST_GATE"]):
+            time.sleep(0.01)
+        super().save(sim, blob)

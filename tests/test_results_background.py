@@ -19,7 +19,7 @@ import xarray as xr
 
 import thirdbody.io.results as results
 from test_results_append import layer_sim, potato_sim, steps_on_disk, stop_after
-from thirdbody.cli import LOCK_NAME
+from thirdbody.cli.lock import LOCK_NAME
 from thirdbody.io import open_results, run_to_file
 
 
@@ -80,28 +80,30 @@ def test_an_interrupted_run_leaves_every_computed_step_and_resumes(tmp_path, chi
 
 @pytest.mark.parametrize("how", ["sigkill-run", "sigint-group"])
 def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path):
-    """After step 4 was computed, SIGKILL of the run (not of its child), or SIGINT to the
-    whole process group as Ctrl-C sends it: the child saves the steps it was sent (0-3), then
-    exits (at the end of the pipe; it ignores SIGINT). The child is slowed down, so that those
-    steps are still in the pipe when the signal comes. The run then resumes to the
-    uninterrupted result. The run holds the output directory's lock as the CLI does: the
-    child holds it until it is done."""
+    """After step 3 was computed, SIGKILL of the run (not of its child), or SIGINT to the
+    whole process group as Ctrl-C sends it: the child saves the steps it was sent (0-2), then
+    exits (at the end of the pipe; it ignores SIGINT). The child saves nothing until a gate
+    opens (after the signal), so that those steps are still in the pipe when the signal comes.
+    The run then resumes to the uninterrupted result. The run holds the output directory's lock
+    as the CLI does: the child holds it until it is done."""
     out = tmp_path / "out"
     out.mkdir()
     path = out / "results.nc"
+    gate = tmp_path / "gate"
     script = textwrap.dedent(f"""
         import os, signal, sys
         from pathlib import Path
         sys.path.insert(0, {TESTS!r})
         os.environ["PYTHONPATH"] = {TESTS!r}
-        from _faulty_writers import SlowWriter
+        os.environ["THIRDBODY_TEST_GATE"] = {str(gate)!r}
+        from _faulty_writers import GatedWriter
         from test_results_append import potato_sim
-        from thirdbody.cli import _lock
+        from thirdbody.cli.lock import lock
         from thirdbody.io import results, run_to_file
 
-        lock = _lock(Path({str(out)!r}))
+        held = lock(Path({str(out)!r}))
 
-        results._StepWriter = SlowWriter    # the child lags: steps wait in the pipe
+        results._StepWriter = GatedWriter   # the child waits: steps wait in the pipe
         made = []
         init = results._BackgroundWriter.__init__
 
@@ -112,7 +114,7 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
         results._BackgroundWriter.__init__ = record
 
         def progress(record):
-            if record.step == 4:
+            if record.step == 3:
                 print(made[0].proc.pid, flush=True)
                 if {how!r} == "sigkill-run":
                     os.kill(os.getpid(), signal.SIGKILL)
@@ -120,7 +122,7 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
 
         try:
             run_to_file(potato_sim(steps=8), {str(path)!r}, progress=progress,
-                        background=True, keep_fds=(lock.fileno(),))
+                        background=True, keep_fds=(held.fileno(),))
         except KeyboardInterrupt:
             sys.exit(130)
     """)
@@ -129,20 +131,25 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
         proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
                                 stderr=err, text=True, start_new_session=True)
         child = int(proc.stdout.readline())
-        code = proc.wait(timeout=300)
+        if how == "sigkill-run":
+            code = proc.wait(timeout=300)
+            # the run is dead, its child still has steps to save: it holds the lock
+            assert _alive(child)
+            with (out / LOCK_NAME).open() as handle, pytest.raises(BlockingIOError):
+                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            gate.touch()
+        else:
+            gate.touch()                # the interrupted run waits for the child to finish
+            code = proc.wait(timeout=300)
     assert code == (-signal.SIGKILL if how == "sigkill-run" else 130), log.read_text()
-    if how == "sigkill-run":            # the run is dead, its child still saves: the lock holds
-        assert _alive(child)
-        with (out / LOCK_NAME).open() as handle, pytest.raises(BlockingIOError):
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     deadline = time.monotonic() + 60
     while _alive(child):                    # it exits by itself, at the end of the pipe
         assert time.monotonic() < deadline, "the writing child did not exit"
         time.sleep(0.05)
     assert _lock_free(out / LOCK_NAME)          # released with the child
     on_disk = open_results(path)
-    assert on_disk.step.values.tolist() == [0, 1, 2, 3]
-    assert on_disk[results.STEP_HISTORY_VARIABLE].size == 4
+    assert on_disk.step.values.tolist() == [0, 1, 2]
+    assert on_disk[results.STEP_HISTORY_VARIABLE].size == 3
     run_to_file(potato_sim(steps=8), path, resume=True)
     straight = potato_sim(steps=8).run()
     xr.testing.assert_identical(open_results(path).drop_vars(_timers(straight)),
@@ -205,16 +212,14 @@ def test_a_child_that_dies_stops_the_run(tmp_path, children):
     assert 1 <= on_disk.sizes["step"] <= 3
 
 
-@pytest.mark.parametrize("backlog", [64 << 20, 0], ids=["waits-in-the-run", "run-waits"])
-def test_steps_the_pipe_cannot_take_wait_and_all_reach_the_file(backlog, monkeypatch, tmp_path,
-                                                                children):
-    """A one-page pipe and a slow child: the steps queue in the run (or, with no backlog
-    allowed, the run waits for the child at every step); all of them reach the file."""
+def test_steps_bigger_than_the_pipe_all_reach_the_file(monkeypatch, tmp_path, children):
+    """A one-page pipe (each step's frame is larger) and a slow child: the run waits at each
+    step until the pipe has taken all of it, so that nothing waits in the run's memory (a
+    SIGKILL loses only the step in progress); every step reaches the file."""
     from _faulty_writers import SlowWriter
 
     monkeypatch.setattr(results, "_StepWriter", SlowWriter)
     monkeypatch.setattr(results, "_PIPE_BYTES", 4096)
-    monkeypatch.setattr(results, "_BACKLOG_BYTES", backlog)
     waiting = []                        # bytes left in the run after each step's hand-over
     original = results._BackgroundWriter.__call__
 
@@ -225,7 +230,46 @@ def test_steps_the_pipe_cannot_take_wait_and_all_reach_the_file(backlog, monkeyp
     monkeypatch.setattr(results._BackgroundWriter, "__call__", call)
     ds = run_to_file(potato_sim(steps=6), tmp_path / "r.nc", background=True)
     assert children[0].stats["appended"] == 5
-    assert (max(waiting) > 0) == (backlog > 0)  # queued in the run, or handed over each time
+    assert waiting == [0] * 6
+    assert max(children[0].frame_bytes) > 4096
     straight = potato_sim(steps=6).run()
+    xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
+                                straight.drop_vars(_timers(ds)))
+
+
+def test_the_run_waits_for_a_child_more_than_a_few_steps_behind(monkeypatch, tmp_path,
+                                                                 children):
+    """The child saves nothing until a gate opens (a second after the start): the run hands
+    over steps 0 to _MAX_BEHIND - 1, then waits at step _MAX_BEHIND until the child has saved
+    a step, so that no step after it is computed before the gate opened. After every step the
+    run is at most _MAX_BEHIND steps ahead of the file, and holds nothing in memory."""
+    import threading
+
+    from _faulty_writers import GatedWriter
+
+    gate = tmp_path / "gate"
+    monkeypatch.setenv("THIRDBODY_TEST_GATE", str(gate))
+    monkeypatch.setattr(results, "_StepWriter", GatedWriter)
+    behind, waiting, computed = [], [], []
+    original = results._BackgroundWriter.__call__
+
+    def call(self, sim, state):
+        original(self, sim, state)
+        behind.append(len(sim.records) - self.saved)
+        waiting.append(len(self.backlog))
+
+    monkeypatch.setattr(results._BackgroundWriter, "__call__", call)
+    opener = threading.Timer(1.0, gate.touch)
+    opener.start()
+    try:
+        ds = run_to_file(potato_sim(steps=8), tmp_path / "r.nc", background=True,
+                         progress=lambda r: computed.append((r.step, gate.exists())))
+    finally:
+        opener.cancel()
+    bound = results._MAX_BEHIND
+    assert max(behind) <= bound and waiting == [0] * 8
+    assert all(opened for step, opened in computed if step > bound), computed
+    assert children[0].stats["appended"] == 7
+    straight = potato_sim(steps=8).run()
     xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
                                 straight.drop_vars(_timers(ds)))

@@ -140,7 +140,8 @@ def test_invalid_case_values_name_the_case_and_the_key():
     with pytest.raises(SweepError) as info:
         parse_sweep({"base": "fig4a", "axes": {"plates.mu": [0.2, -0.1]}}).cases()
     message = str(info.value)
-    assert "plates.mu = -0.1" in message and "plates.mu_up" in message and "ge 0" in message
+    assert "plates.mu = -0.1" in message and "plates.mu_up" in message
+    assert "must be >= 0" in message                 # the allowed range
     assert "plates.mu = 0.2" not in message          # only the bad case is reported
 
 
@@ -322,6 +323,9 @@ base = "base.toml"
                                  client.scheduler.address, "--no-plots"])
     assert result.exit_code == 0, result.output
     assert "1 cases: 1 run, 0 already done, 0 not complete" in result.output
+    # no terminal here: a plain line for the case, then what comes next
+    assert "[1/1] case " in result.output and "elapsed" in result.output
+    assert "writing the summary\n" in result.output
     assert client.run(os.getpid) == before          # same workers, still running
     s = open_results(tmp_path / "out" / "summary.nc")
     assert BEHAVIOURS[int(s.behaviour.sel(orientation_deg=35.0))] == "stick"

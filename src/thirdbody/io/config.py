@@ -360,6 +360,10 @@ class Config(_Model):
                 table["geometry"]["file"] = str(path)
                 if path.is_file():
                     table["geometry"]["sha256"] = _sha256(path)
+        # values the inputs leave to a rule, written out
+        data["plates"].setdefault("mu_low", data["plates"]["mu_up"])
+        if data["load"]["program"] in ("linear_ramp", "gap_ramp"):
+            data["load"].setdefault("start", data["load"]["stop"] / data["load"]["steps"])
         head: dict = {}
         if "particle" in data:
             particle = data.pop("particle")
@@ -381,23 +385,127 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+_TAGS = ("sphere", "ellipsoid", "potato", "mesh", "linear_ramp", "hold_then_ramp",
+         "force_table", "gap_ramp")
+_BOUNDS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+
+
+def _key(loc: tuple) -> str:
+    """The key as the user wrote it: ``particle.E``, ``particles[1].radius``, ``load.forces``
+    (without pydantic's inner names: the geometry table, the tags of the tables' kinds)."""
+    key = ""
+    for part in loc:
+        if isinstance(part, int):
+            key += f"[{part}]"
+        elif part != "geometry" and part not in _TAGS and not str(part).endswith(
+                ("Shape", "Load", "ShapeConfig")):
+            key += f".{part}" if key else str(part)
+    return key
+
+
+def _got(value) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _error_line(err: dict) -> str | None:
+    """One line for one pydantic error: the key, what is allowed, what was given."""
+    kind, loc, ctx = err["type"], tuple(err["loc"]), err.get("ctx") or {}
+    key, got = _key(loc), err.get("input")
+    if kind == "missing" and loc and isinstance(loc[-1], int):
+        return None                     # a list too short: said once, by _short_lists
+    if kind == "missing":
+        return f"{key}: required key missing"
+    if kind == "extra_forbidden":
+        return f"{key}: unknown key"
+    if kind in ("union_tag_invalid", "union_tag_not_found"):
+        tags = ctx.get("expected_tags", "")
+        where = f"{key}.{ctx.get('discriminator', '').strip(chr(39))}"
+        if kind == "union_tag_not_found":
+            return f"{where}: required key missing (one of {tags})"
+        return f"{where} = {ctx.get('tag')!r}: not one of {tags}"
+    if kind == "literal_error":
+        return f"{key} = {_got(got)}: not one of {ctx.get('expected')}"
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal"):
+        bound = next((f"{_BOUNDS[k]} {v}" for k, v in ctx.items() if k in _BOUNDS), "")
+        return f"{key} = {_got(got)}: must be {bound}"
+    if kind in ("float_type", "float_parsing"):
+        return f"{key} = {_got(got)}: not a valid number"
+    if kind == "finite_number":
+        return f"{key} = {_got(got)}: must be a finite number"
+    if kind in ("int_type", "int_parsing", "int_from_float"):
+        return f"{key} = {_got(got)}: must be a whole number"
+    if kind in ("bool_type", "bool_parsing"):
+        return f"{key} = {_got(got)}: must be true or false"
+    if kind in ("string_type",):
+        return f"{key} = {_got(got)}: must be a string"
+    if kind in ("too_short", "too_long"):
+        n = len(got) if hasattr(got, "__len__") else "?"
+        if kind == "too_short":
+            return f"{key}: give at least {ctx.get('min_length')} value(s); got {n}"
+        return f"{key}: give at most {ctx.get('max_length')} values; got {n}"
+    if kind in ("list_type", "tuple_type"):
+        return f"{key} = {_got(got)}: must be a list [...]"
+    if kind in ("model_type", "dict_type", "model_attributes_type"):
+        return f"{key}: must be a table" + (f" ([{key}])" if key else "")
+    if kind == "value_error":
+        message = str(err["msg"]).removeprefix("Value error, ")
+        return f"{key or 'the configuration'}: {message}"
+    return f"{key}: {err['msg']}; got {_got(got)}"
+
+
+def _short_lists(exc: ValidationError) -> list[str]:
+    """One line per fixed-length list given too few values (pydantic reports each missing
+    position)."""
+    missing: dict[tuple, tuple[int, object]] = {}
+    for err in exc.errors():
+        loc = tuple(err["loc"])
+        if err["type"] == "missing" and loc and isinstance(loc[-1], int):
+            n, _ = missing.get(loc[:-1], (0, None))
+            missing[loc[:-1]] = (max(n, loc[-1] + 1), err.get("input"))
+    return [f"{_key(loc)}: give {n} values; got {len(got) if hasattr(got, '__len__') else 0}"
+            + (f" ({_got(got)})" if got is not None else "")
+            for loc, (n, got) in missing.items()]
+
+
 def _format_errors(exc: ValidationError, source: str) -> str:
     lines = [f"invalid configuration {source}:"]
-    for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"] if p not in ("geometry",) and not
-                       str(p).endswith("Shape") and not str(p).endswith("Load")
-                       and p not in ("sphere", "ellipsoid", "potato", "mesh", "linear_ramp",
-                                     "hold_then_ramp", "force_table", "gap_ramp"))
-        msg = err["msg"]
-        if err["type"] == "extra_forbidden":
-            msg = "unknown key"
-        ctx = err.get("ctx") or {}
-        allowed = ", ".join(f"{k} {v}" for k, v in ctx.items() if k in ("gt", "ge", "lt", "le"))
-        got = err.get("input")
-        detail = f" (allowed: {allowed})" if allowed else ""
-        lines.append(f"  {loc}: {msg}{detail}; got {got!r}" if err["type"] != "missing"
-                     else f"  {loc}: required key missing")
+    for line in [*(_error_line(err) for err in exc.errors()), *_short_lists(exc)]:
+        if line is not None and f"  {line}" not in lines:
+            lines.append(f"  {line}")
     return "\n".join(lines)
+
+
+#: a particle larger than this across (m) is taken for a units mistake
+MAX_ACROSS = 0.1
+
+
+def _check_sizes(cfg: Config, body) -> None:
+    """Refuse a particle more than MAX_ACROSS across: lengths are in metres, and a grain of
+    1 m is, far more often, one in millimetres (or a mesh file read with the wrong scale)."""
+    placed = [body] if cfg.particle is not None else [p.particle for p in body]
+    tables = ([cfg.particle] if cfg.particle is not None
+              else list(cfg.particles) if cfg.particles is not None else None)
+    for k, particle in enumerate(placed):
+        across = 2 * particle.shape.size
+        if across <= MAX_ACROSS:
+            continue
+        if tables is None:
+            key, given = "layer.size", f"size = {cfg.layer.size!r}"
+        else:
+            g = tables[k].geometry
+            where = "particle" if cfg.particle is not None else f"particles[{k}]"
+            if isinstance(g, MeshShapeConfig):
+                raise ConfigError(
+                    f"{where}.scale = {g.scale!r}: the mesh {g.file} is then {across:.3g} m "
+                    "across; scale converts the file's unit to metres (1.0e-3 for a file in "
+                    "millimetres). Is that the file's unit?")
+            name = "radius" if isinstance(g, SphereShape) else "semi_axes"
+            value = getattr(g, name)
+            value = list(value) if isinstance(value, tuple) else value
+            key, given = f"{where}.{name}", f"{name} = {value!r}"
+        raise ConfigError(f"{key}: the particle is {across:.3g} m across ({given}); lengths "
+                          "are in metres (1 mm = 1.0e-3): are these millimetres?")
 
 
 def load_config(path: str | Path) -> Config:
@@ -423,8 +531,12 @@ def parse_config(data: dict, source: str = "<dict>", base_dir: str = ".") -> Con
     except ValidationError as exc:
         raise ConfigError(_format_errors(exc, source)) from None
     try:
-        cfg.build()
+        body = cfg.build()[0]
     except (ValueError, OSError) as exc:       # checks only the objects can make
+        raise ConfigError(f"invalid configuration {source}: {exc}") from None
+    try:
+        _check_sizes(cfg, body)
+    except ConfigError as exc:
         raise ConfigError(f"invalid configuration {source}: {exc}") from None
     return cfg
 

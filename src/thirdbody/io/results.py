@@ -283,6 +283,7 @@ class _StepWriter:
                      unlimited_dims=[d for d in _GROWING if d in ds.dims],
                      encoding={name: {"chunksizes": _chunks(var)}
                                for name, var in ds.variables.items() if var.dims})
+        _bound_scales(self.tmp)
         os.replace(self.tmp, self.path)
         self.whole += 1
 
@@ -331,11 +332,14 @@ class _BackgroundWriter:
     """The per-step checkpoint of :func:`run_to_file` with ``background``: a :class:`_StepWriter`
     run in a child process (``python -m thirdbody.io._writer``, a fresh interpreter: nothing of
     this process's threads or locks), so that the simulation computes the next step while the
-    last one is written. Each step the run pickles what the child needs (the records and maps
-    not sent yet, the resume snapshot: it needs the solver state) and writes it to the child's
-    stdin without waiting; what the pipe cannot take yet (while the child starts, or writes the
-    first step's whole file) waits in this process and goes at the next step, or when more than
-    ``_BACKLOG_BYTES`` wait.
+    last one is written.
+
+    Each step the run sends the child what it needs: the records and maps not sent yet (maps
+    only on the steps that store them) and the resume snapshot (the solver state), compressed.
+    The whole step goes into the pipe before the run goes on, so nothing waits in this
+    process's memory: if the run is killed, only the step in progress is lost. The child
+    reports each step it has saved; when it is more than :data:`_MAX_BEHIND` steps behind,
+    the run waits for it, so that the file follows the run.
 
     The child runs in its own session: Ctrl-C, sent to the terminal's process group, does not
     reach it, and :meth:`close` lets it save every step it was sent. If the run is killed, the
@@ -350,8 +354,10 @@ class _BackgroundWriter:
 
         self.path = writer.path
         self.sent: tuple[int, int] | None = None    # records, maps sent (None: nothing yet)
+        self.saved = len(writer.history)             # steps the child has reported saved
         self.stats: dict = {}                        # the child's counters, after close()
         self.seconds = 0.0                           # wall time of the run spent here
+        self.frame_bytes: list[int] = []             # the size of each step sent
         start = time.perf_counter()
         self.proc = subprocess.Popen([sys.executable, "-m", "thirdbody.io._writer"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -359,34 +365,33 @@ class _BackgroundWriter:
         self.fd, self.replies = self.proc.stdin.fileno(), self.proc.stdout.fileno()
         _widen(self.fd)
         os.set_blocking(self.fd, False)
-        self.backlog = bytearray()                   # pickled frames the pipe did not take yet
-        self._send((writer, _Datasets(sim)))
+        self.backlog = bytearray()      # bytes of the frame being sent that the pipe has not
+        self._send(_pickled((writer, _Datasets(sim))))  # taken yet: none once _send returns
         self.seconds += time.perf_counter() - start
 
     def __call__(self, sim, state) -> None:
+        import zlib
+
         start = time.perf_counter()
         self._check()
         n, m = self.sent or (0, 0)          # the first time: the whole history (a resumed run)
-        self._send((sim.records[n:], sim.maps[m:], sim.snapshot(state, history=False),
-                    sim.status))
+        blob = zlib.compress(sim.snapshot(state, history=False), 1)
+        self._send(_pickled((sim.records[n:], sim.maps[m:], blob, sim.status)))
         self.sent = (len(sim.records), len(sim.maps))
+        self._wait_for(len(sim.records) - _MAX_BEHIND)
         self.seconds += time.perf_counter() - start
 
-    def _send(self, item) -> None:
-        self.backlog += _frame(pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL))
-        self._pump(block=len(self.backlog) > _BACKLOG_BYTES)
-
-    def _pump(self, block: bool) -> None:
-        """Write the backlog to the pipe: what it takes now, or all of it if ``block``."""
+    def _send(self, data: bytes) -> None:
+        """Put ``data`` into the pipe as one frame, waiting while the pipe is full."""
         import select
 
+        self.backlog += _frame(data)
+        self.frame_bytes.append(len(self.backlog))
         while self.backlog:
             try:
                 done = os.write(self.fd, self.backlog)
             except BlockingIOError:
-                if not block:
-                    return
-                select.select([], [self.fd], [], 1.0)
+                select.select([self.replies], [self.fd], [], 1.0)
                 self._check()
                 continue
             except OSError:                 # the child is gone
@@ -394,20 +399,32 @@ class _BackgroundWriter:
                 raise
             del self.backlog[:done]
 
+    def _wait_for(self, steps: int) -> None:
+        """Wait until the child has saved at least ``steps`` steps."""
+        import select
+
+        while self.saved < steps:
+            select.select([self.replies], [], [], 1.0)
+            self._check()
+
     def _check(self, wait: bool = False) -> None:
-        """Raise the child's error, if it sent one; a RuntimeError if it died."""
+        """Read the child's reports: the steps saved so far; raise its error, if it sent one;
+        a RuntimeError if it died."""
         import select
 
         if wait:
             self.proc.wait()
-        if select.select([self.replies], [], [], 0)[0]:
+        while select.select([self.replies], [], [], 0)[0]:
             try:
                 kind, value = pickle.loads(_read_frame(self.replies))
             except (EOFError, OSError, pickle.UnpicklingError):
-                kind, value = "died", None
-            if kind == "error":
+                time.sleep(0.01)        # the child has closed its end: it is exiting
+                break
+            if kind == "saved":
+                self.saved = value
+            elif kind == "error":
                 raise value
-            if kind == "done":
+            elif kind == "done":
                 self.stats = value
                 return
         if self.proc.poll() is not None:
@@ -419,8 +436,7 @@ class _BackgroundWriter:
         """Let the child save every step it was sent and exit; raise its error, if any."""
         start = time.perf_counter()
         try:
-            self.backlog += _frame(b"")     # the end
-            self._pump(block=True)
+            self._send(b"")                 # the end
         finally:
             self.proc.stdin.close()
             self.proc.wait()
@@ -447,6 +463,10 @@ class _Datasets:
                                frame=frame, raw=raw)
 
 
+def _pickled(item) -> bytes:
+    return pickle.dumps(item, protocol=pickle.HIGHEST_PROTOCOL)
+
+
 def _frame(data: bytes) -> bytes:
     return len(data).to_bytes(8, "little") + data
 
@@ -469,8 +489,13 @@ def _read_frame(fd: int) -> bytes:
 def serve(reader: int = 0, replies: int = 1) -> None:
     """The child of :class:`_BackgroundWriter` (``python -m thirdbody.io._writer``): read the
     writer, then save each step the run sends until it sends the end or its end of the pipe
-    closes (the run ended or was killed); then report on ``replies``."""
+    closes (the run ended or was killed), reporting each step saved on ``replies``; then
+    report how it went."""
+    import zlib
+
     import dask
+    import h5netcdf  # noqa: F401 - imported while the run computes its first step
+    import xarray  # noqa: F401
 
     busy = 0.0
     try:
@@ -488,28 +513,36 @@ def serve(reader: int = 0, replies: int = 1) -> None:
                 records, maps, blob, sim.status = pickle.loads(data)
                 sim.records.extend(records)
                 sim.maps.extend(maps)
-                writer.save(sim, blob)
+                writer.save(sim, zlib.decompress(blob))
                 busy += time.perf_counter() - start
+                _reply(replies, ("saved", len(sim.records)))
         reply = ("done", {"whole": writer.whole, "appended": writer.appended,
                           "regrids": writer.regrids, "seconds": dict(writer.seconds),
                           "busy": busy})
     except BaseException as exc:            # reported to the run, which raises it
         reply = ("error", exc)
     try:
-        try:
-            text = pickle.dumps(reply)
-        except Exception:                   # an exception that does not pickle
-            text = pickle.dumps(("error", RuntimeError(f"saving the results failed: "
-                                                       f"{reply[1]!r}")))
-        os.write(replies, _frame(text))
-    except OSError:                         # the run is gone: nobody to tell
+        pickle.dumps(reply)
+    except Exception:                       # an exception that does not pickle
+        reply = ("error", RuntimeError(f"saving the results failed: {reply[1]!r}"))
+    _reply(replies, reply)
+
+
+def _reply(replies: int, message: tuple) -> None:
+    """Send ``message`` to the run (nobody to tell if it is gone: the steps are saved all the
+    same)."""
+    data = _frame(pickle.dumps(message))
+    try:
+        while data:
+            data = data[os.write(replies, data):]
+    except OSError:
         pass
 
 
 #: the pipe to the writing child holds this many bytes (Linux's default limit for a user)
 _PIPE_BYTES = 1 << 20
-#: the run waits for the child when more than this many bytes of steps wait to be sent
-_BACKLOG_BYTES = 64 << 20
+#: the run waits for the child when the child is more than this many steps behind
+_MAX_BEHIND = 3
 
 
 def _widen(fd: int) -> None:
@@ -582,6 +615,42 @@ def _regrid(f, tail, old: tuple[int, int, int, int], new: tuple[int, int, int, i
         d = f[name]
         d.resize(tail[name].values.shape)
         d[...] = tail[name].values
+
+
+#: the length up to which a growing dimension's scale can be extended (see _bound_scales)
+_MAX_ROWS = 1 << 40
+
+
+def _bound_scales(path: Path) -> None:
+    """Give the scale of each growing dimension in the file ``path`` a finite maximum length
+    instead of an unlimited one; the variables along it stay unlimited.
+
+    Why: for an unlimited dimension, h5netcdf finds the length by dereferencing every
+    variable along it, and it does so each time it asks a variable for its shape, so that
+    xarray's opening costs (variables along ``step``)² dereferences: 2-10 s for an unfinished
+    results file against a few tens of ms for h5netcdf to read the step count. A bounded
+    scale's length is its own, read at once; appending extends it with the variables."""
+    import h5py
+
+    with h5py.File(path, "r+") as f:
+        for dim in _GROWING:
+            if dim not in f or f[dim].maxshape != (None,):
+                continue
+            old = f[dim]
+            attached = [(f[ref], int(axis)) for ref, axis in old.attrs.get("REFERENCE_LIST", [])]
+            for var, axis in attached:
+                var.dims[axis].detach_scale(old)
+            name = old.attrs["NAME"]
+            attrs = [(k, old.attrs[k], old.attrs.get_id(k).dtype) for k in old.attrs
+                     if k not in ("CLASS", "NAME", "REFERENCE_LIST")]
+            data, chunks = old[...], old.chunks
+            del f[dim]
+            new = f.create_dataset(dim, data=data, maxshape=(_MAX_ROWS,), chunks=chunks)
+            new.make_scale(name.decode("ascii") if isinstance(name, bytes) else str(name))
+            for k, value, dtype in attrs:
+                new.attrs.create(k, value, dtype=dtype)
+            for var, axis in attached:
+                var.dims[axis].attach_scale(new)
 
 
 def _extend(f, name: str, n: int, rows: np.ndarray | None, total: int | None = None) -> None:

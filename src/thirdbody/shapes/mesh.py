@@ -138,18 +138,22 @@ class MeshShape(Shape):
         name = str(path)
         if not Path(path).is_file():
             raise ValueError(f"mesh file {name!r} does not exist")
+        readable = "readable formats: STL (binary or ASCII), OBJ, PLY, OFF, GLB/GLTF"
         try:
             mesh = tm.load(path, force="mesh")
-        except (ValueError, OSError):
-            raise
+        except PermissionError as exc:
+            raise ValueError(f"cannot read mesh file {name!r}: {exc.strerror}") from exc
         except Exception as exc:
-            # trimesh raises NotImplementedError for unknown types, ImportError (or
-            # ModuleNotFoundError) when a format's optional backend is missing (.step), ...
-            readable = "STL, OBJ, PLY, OFF, GLB/GLTF"
-            raise ValueError(f"cannot read mesh file {name!r} ({type(exc).__name__}: {exc}); "
-                             f"readable formats: {readable}") from None
+            # each format's parser fails in its own words (ValueError, IndexError, ...); an
+            # unknown type is a NotImplementedError, a format whose optional backend is missing
+            # an ImportError: none of them says what the user needs to know
+            kind = Path(path).suffix.lstrip(".").upper() or "mesh"
+            raise ValueError(f"mesh file {name!r} is not a readable {kind} file; "
+                             f"{readable}") from exc
         if not isinstance(mesh, tm.Trimesh) or len(mesh.faces) == 0:
-            raise ValueError(f"mesh file {name!r} contains no triangles")
+            raise ValueError(f"mesh file {name!r} is not a readable "
+                             f"{Path(path).suffix.lstrip('.').upper() or 'mesh'} file: no "
+                             f"triangles in it; {readable}")
         if scale != 1.0:
             mesh.apply_scale(float(scale))
         _check_closed(mesh, name)

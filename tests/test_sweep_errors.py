@@ -1,6 +1,7 @@
-"""Issue 15, sweeps: an unreadable case file is never destroyed, --dry-run changes nothing,
-the size is shown at once and capped, string axes are refused, Ctrl-C stops cleanly, an edited
-mesh is a new case, and a rerun of a finished sweep touches nothing."""
+"""A sweep's refusals, damaged files, reruns and Ctrl-C: an unreadable case file is never
+destroyed, --dry-run changes nothing, the size is shown at once and capped, string axes are
+refused, Ctrl-C stops cleanly, an edited mesh is a new case, and a rerun of a finished sweep
+touches nothing."""
 
 from __future__ import annotations
 

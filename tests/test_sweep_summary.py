@@ -1,0 +1,55 @@
+"""The sweep summary of one case: a case that never turned rotated by exactly zero, and the
+final ratios are signed like the state plot's."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+
+def _case(quaternions, turned, forces, ratio_low):
+    from thirdbody.sweep import _CaseData
+
+    n = len(turned)
+    arrays = {"turned": np.asarray(turned, dtype=np.int8), "state": np.zeros(n, dtype=np.int8),
+              "quaternion": np.asarray(quaternions, dtype=float),
+              "ratio": np.stack([np.full(n, 0.5), ratio_low], axis=1),
+              "compression": np.linspace(0.01, 0.03, n), "normal_force": np.arange(1.0, n + 1),
+              "time_total": np.ones(n), "tangential_force": np.asarray(forces, dtype=float)}
+    start = Rotation.from_euler("y", 20, degrees=True).as_quat()
+    return _CaseData("complete", False, json.dumps({"quaternion": list(start)}), "0", arrays, {})
+
+def test_a_case_that_never_turned_rotated_by_exactly_zero():
+    from thirdbody.sweep import _case_summary
+
+    # the stored orientation is the input's up to round-off (another route to the same turn)
+    same = Rotation.from_euler("y", 20, degrees=True).as_quat()
+    for _ in range(8):
+        same[1] = np.nextafter(same[1], 1.0)
+    off = (Rotation.from_quat(same) * Rotation.from_euler("y", 20, degrees=True).inv())
+    assert off.magnitude() > 0                       # the round-off the summary must not report
+    out = _case_summary(_case([same] * 3, [0, 0, 0], [[1.0, 0.0]] * 3, [0.2, 0.3, 0.4]))
+    assert out["total_rotation"] == 0.0 and math.copysign(1.0, out["total_rotation"]) == 1.0
+    assert math.isnan(out["turn_azimuth"])
+
+def test_final_ratios_are_signed_like_the_state_plot():
+    """F' reverses (its x component changes sign) in the last step: the summary reports the
+    ratio negative, as the plot draws it; a run that keeps its direction stays positive."""
+    from thirdbody.plot import _signed
+    from thirdbody.sweep import _case_summary
+
+    q = [Rotation.from_euler("y", 20, degrees=True).as_quat()] * 3
+    forces = [[0.0, 0.0], [2.0, 0.5], [-1.0, 0.1]]
+    out = _case_summary(_case(q, [0, 0, 0], forces, [0.2, 0.3, 0.072]))
+    assert out["final_ratio_low"] == -0.072
+    assert out["final_ratio_up"] == -0.5
+    # the same sign as the plot's: computed here by hand, F'·F'_first < 0
+    assert float(np.dot(forces[2], forces[1])) < 0
+    import xarray as xr
+    ds = xr.Dataset({"tangential_force": (("step", "component"), np.array(forces))})
+    assert _signed(ds)[-1] == -1.0
+    kept = _case_summary(_case(q, [0, 0, 0], [[1.0, 0.0]] * 3, [0.2, 0.3, 0.4]))
+    assert kept["final_ratio_low"] == 0.4
