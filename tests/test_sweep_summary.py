@@ -14,11 +14,16 @@ def _case(quaternions, turned, forces, ratio_low):
     from thirdbody.sweep import _CaseData
 
     n = len(turned)
-    arrays = {"turned": np.asarray(turned, dtype=np.int8), "state": np.zeros(n, dtype=np.int8),
-              "quaternion": np.asarray(quaternions, dtype=float),
-              "ratio": np.stack([np.full(n, 0.5), ratio_low], axis=1),
-              "compression": np.linspace(0.01, 0.03, n), "normal_force": np.arange(1.0, n + 1),
-              "time_total": np.ones(n), "tangential_force": np.asarray(forces, dtype=float)}
+    # one particle: the per-particle variables along (step, particle = 1)
+    arrays = {"turned": np.asarray(turned, dtype=np.int8)[:, None],
+              "state": np.zeros((n, 1), dtype=np.int8),
+              "quaternion": np.asarray(quaternions, dtype=float)[:, None],
+              "ratio": np.stack([np.full(n, 0.5), ratio_low], axis=1)[:, None],
+              "compression": np.linspace(0.01, 0.03, n), "total_force": np.arange(1.0, n + 1),
+              "loaded": np.ones(n, dtype=np.int64), "fraction_stick": np.ones(n),
+              "fraction_roll": np.zeros(n), "fraction_rotate": np.zeros(n),
+              "time_total": np.ones(n),
+              "tangential_force": np.asarray(forces, dtype=float)[:, None]}
     start = Rotation.from_euler("y", 20, degrees=True).as_quat()
     return _CaseData("complete", False, json.dumps({"quaternion": list(start)}), "0", arrays, {})
 
