@@ -42,10 +42,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.fft import next_fast_len
 
 from .._citations import cites
-from .normal import ConvergenceError, NormalContact, _prolong, _restrict
+from .grid import fast_span, prolong, restrict
+from .normal import ConvergenceError, NormalContact
 from .operator import coupling_operator, tangential_operator
 
 _KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Contact. Kluwer; "
@@ -358,15 +358,6 @@ def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA:
         stick = contact & ~slip & ~zero_limit
     return None
 
-def _fast_span(a: int, b: int, n: int) -> slice:
-    """Widen [a, b) inside [0, n) to a length whose FFTs are fast (5-smooth), if it fits."""
-    size = next_fast_len(b - a, real=True)
-    if size > n:
-        return slice(a, b)
-    lo = max(0, min(a - (size - (b - a)) // 2, n - size))
-    return slice(lo, lo + size)
-
-
 def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.ndarray,
                   limit: np.ndarray, contact: np.ndarray, force: np.ndarray | None,
                   shift: np.ndarray | None, tol: float, scalar: bool, max_outer: int,
@@ -378,10 +369,10 @@ def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.nd
     dx, dy = spacing
     shape = contact.shape
     if initial is None and min(shape) >= 2 * _COARSEST:
-        c_limit = _restrict(limit)
-        c_contact = (_restrict(contact.astype(float)) > 0) & (c_limit > 0)
-        c_tau0 = np.stack([_restrict(t) for t in tau0])
-        c_rigid = None if rigid is None else np.stack([_restrict(r) for r in rigid])
+        c_limit = restrict(limit)
+        c_contact = (restrict(contact.astype(float)) > 0) & (c_limit > 0)
+        c_tau0 = np.stack([restrict(t) for t in tau0])
+        c_rigid = None if rigid is None else np.stack([restrict(r) for r in rigid])
         coarse = _solve_levels((2 * dx, 2 * dy), G, nu, c_tau0, c_limit, c_contact, force,
                                shift, max(tol, 1e-4), scalar, max_outer, max_inner,
                                rigid=c_rigid)
@@ -393,11 +384,11 @@ def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.nd
             c_slip = c_contact & (c_norm >= c_limit * (1 - 1e-6))
             with np.errstate(divide="ignore", invalid="ignore"):
                 c_dir = np.where(c_slip, c_tau / np.where(c_norm > 0, c_norm, 1.0), 0.0)
-            slip = _prolong(c_slip.astype(float), shape) > 0.5
+            slip = prolong(c_slip.astype(float), shape) > 0.5
             initial = np.zeros((2, *shape))
             for k in range(c_tau.shape[0]):
-                initial[k] = np.where(slip, limit * _prolong(c_dir[k], shape),
-                                      _prolong(c_tau[k], shape))
+                initial[k] = np.where(slip, limit * prolong(c_dir[k], shape),
+                                      prolong(c_tau[k], shape))
     K = tangential_operator(shape, spacing, G, nu)
     return _active_set(K, tau0, limit, contact, dx * dy, force, shift, tol, scalar, max_outer,
                        max_inner, initial, rigid)
@@ -561,7 +552,7 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
     cols = np.flatnonzero(contact.any(axis=0))
     if rows.size == 0:
         raise ValueError("the normal solution has no contact")
-    box = (_fast_span(rows[0], rows[-1] + 1, grid.ny), _fast_span(cols[0], cols[-1] + 1, grid.nx))
+    box = (fast_span(rows[0], rows[-1] + 1, grid.ny), fast_span(cols[0], cols[-1] + 1, grid.nx))
     cells = (slice(None), *box)
     rigid_box = None if rigid is None else rigid[cells]
     outside = tau0.copy()
