@@ -604,21 +604,22 @@ def test_a_wrong_answer_from_the_active_set_is_never_returned(monkeypatch):
     """The solver's answer is checked against Coulomb's law with displacements recomputed from
     the traction: an active-set solution spoiled after the fact (every stick traction 1 %
     off) raises ConvergenceError, in force control and in displacement control."""
-    from thirdbody.bem import tangential
+    from dataclasses import replace
+
+    from thirdbody.bem.active_set import ActiveSet
     from thirdbody.bem.normal import ConvergenceError
 
     _, _, normal = setup(32, 0.3)
     good = solve_tangential(normal, MU, force=0.5 * MU * W)
-    solve = tangential._active_set
+    finalize = ActiveSet.finalize
 
-    def spoiled(*args, **kwargs):
-        out = solve(*args, **kwargs)
+    def spoiled(self):
+        out = finalize(self)
         if out is None:
             return None
-        tau, du, ds, stick, iterations = out
-        return np.where(stick, 1.01 * tau, tau), du, ds, stick, iterations
+        return replace(out, traction=np.where(out.stick, 1.01 * out.traction, out.traction))
 
-    monkeypatch.setattr(tangential, "_active_set", spoiled)
+    monkeypatch.setattr(ActiveSet, "finalize", spoiled)
     with pytest.raises(ConvergenceError, match="Coulomb residual"):
         solve_tangential(normal, MU, shift=good.shift)
     with pytest.raises(ConvergenceError):
@@ -629,16 +630,18 @@ def test_a_force_missed_by_the_active_set_is_never_returned(monkeypatch):
     """The force, like Coulomb's law, is checked from the tractions: an active set handed a
     force 1 % off (an answer that obeys Coulomb's law for the wrong load) is not returned;
     the shift search takes over and meets the prescribed force."""
-    from thirdbody.bem import tangential
+    from dataclasses import replace
+
+    from thirdbody.bem.active_set import ActiveSet
 
     _, _, normal = setup(32, 0.3)
-    solve = tangential._active_set
+    setup_active_set = ActiveSet.setup
 
-    def misled(K, tau0, limit, contact, dA, force, *args, **kwargs):
-        force = None if force is None else 1.01 * np.asarray(force)
-        return solve(K, tau0, limit, contact, dA, force, *args, **kwargs)
+    def misled(self, window, *args, **kwargs):
+        force = None if window.force is None else 1.01 * np.asarray(window.force)
+        return setup_active_set(self, replace(window, force=force), *args, **kwargs)
 
-    monkeypatch.setattr(tangential, "_active_set", misled)
+    monkeypatch.setattr(ActiveSet, "setup", misled)
     t = solve_tangential(normal, MU, force=(0.5 * MU * W, 0.1 * MU * W))
     check_coulomb(t)
     np.testing.assert_allclose(t.force, (0.5 * MU * W, 0.1 * MU * W), rtol=0,

@@ -43,20 +43,14 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .._citations import cites
-from .grid import fast_span, prolong, restrict
+from .active_set import WindowStep, solve_on_levels
+from .coulomb import coulomb_residual, project_on_discs
+from .grid import fast_span
 from .normal import ConvergenceError, NormalContact
 from .operator import coupling_operator, tangential_operator
 
-_KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Contact. Kluwer; "
-           "Vollebregt, E. A. H. (2014). J. Comput. Phys. 257, 333-351 (CG with FFT "
-           "preconditioner).")
-
-
-_DEBUG = False
-_COARSEST = 16    # cells across the contact box on the coarsest level
-_SOFT = 1.0
-_ETA = 0.1
+__all__ = ["FrictionLimitError", "TangentialContact", "coulomb_residual", "restart_traction",
+           "solve_tangential"]
 
 
 class FrictionLimitError(ValueError):
@@ -138,19 +132,6 @@ class TangentialContact:
                      * self.normal.grid.cell_area)
 
 
-def coulomb_residual(traction: np.ndarray, slip_increment: np.ndarray, pressure: np.ndarray,
-                     mu: float, self_compliance: float) -> float:
-    """Natural residual of Coulomb's law (see :class:`TangentialContact`), dimensionless."""
-    trial = traction + slip_increment / self_compliance
-    norm = np.sqrt((trial * trial).sum(axis=0))
-    limit = mu * pressure
-    with np.errstate(divide="ignore", invalid="ignore"):
-        factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
-    diff = traction - trial * factor
-    scale = mu * float(pressure.max())
-    return float(np.sqrt((diff * diff).sum(axis=0)).max() / scale) if scale > 0 else 0.0
-
-
 def restart_traction(traction: np.ndarray, slipping: np.ndarray, normal: NormalContact,
                      mu: float) -> np.ndarray:
     """A start for a tangential solve close to a solved one (the same load under a slightly
@@ -162,236 +143,6 @@ def restart_traction(traction: np.ndarray, slipping: np.ndarray, normal: NormalC
         unit = traction / np.where(norm > 0, norm, 1.0)
     return np.where(slipping & normal.contact, mu * normal.pressure * unit,
                     np.where(normal.contact, traction, 0.0))
-
-
-def _project_on_discs(tau: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    norm = np.sqrt((tau * tau).sum(axis=0))     # (1, ny, nx) in the scalar problem: |τ_x|
-    with np.errstate(divide="ignore", invalid="ignore"):
-        factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
-    return tau * factor
-
-
-@cites("kalker_tangcg", _KALKER)
-def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA: float,
-                force: np.ndarray | None, shift: np.ndarray | None, tol: float,
-                scalar: bool, max_outer: int, max_inner: int,
-                initial: np.ndarray | None = None, rigid: np.ndarray | None = None):
-    """Solve one step on a window. Returns (tau, du, ds, stick, iterations) or None.
-
-    ``initial`` is a starting traction (e.g. from a coarser grid): its cells on the friction limit
-    start in the slip set with its directions. ``rigid`` (2, ny, nx) is a prescribed rigid
-    displacement increment of the plate on top of the uniform shift ``ds`` (a twist), m.
-    """
-    force_control = force is not None
-    ncomp = 1 if scalar else 2
-    T = K._t
-
-    def apply(t: np.ndarray) -> np.ndarray:
-        if scalar:
-            spec = T.forward(t[0])
-            spec *= K.spectra[0]
-            return T.inverse(spec)[None]
-        return K(t)
-
-    def precondition(r: np.ndarray) -> np.ndarray:
-        return K.precondition(r, scalar=scalar)
-
-    tau0 = tau0[:ncomp]
-    rigid = np.zeros_like(tau0) if rigid is None else rigid[:ncomp]
-    k0 = K.self_terms[0]
-    # cells with zero friction limit (p = 0 at the contact edge) carry no traction
-    zero_limit = contact & (limit <= 0)
-    if initial is None:
-        # start from the previous traction on the new friction discs (it stays the reference of
-        # the displacement increment: the surface moved by K (τ − τ⁰) in this step, eq. 7)
-        tau = _project_on_discs(np.where(contact, tau0, 0.0), limit)
-        slip = np.zeros_like(contact)
-        direction = np.zeros_like(tau0)
-    else:
-        tau = _project_on_discs(np.where(contact, initial[:ncomp], 0.0), limit)
-        norm0 = np.sqrt((tau * tau).sum(axis=0))
-        slip = contact & ~zero_limit & (norm0 >= limit * (1 - 1e-6))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            direction = np.where(slip, tau / np.where(norm0 > 0, norm0, 1.0), 0.0)
-    stick = contact & ~slip & ~zero_limit
-    loose = max(tol, 1e-4)
-    inner_tol = loose
-    changing = True
-    iterations = 0
-    ds = np.zeros(ncomp) if force_control else np.asarray(shift, dtype=float)[:ncomp]
-    eye = np.eye(ncomp)
-    # curvature of |τ| = μp (the slip multiplier |w|/(μp)): the Newton term on rotations
-    curvature = np.zeros(contact.shape)
-
-    # slip sets visited since the last CG step; a return to one of them is a cycle
-    seen: set[bytes] = set()
-    for _outer in range(max_outer):
-        iterations_before = iterations
-        # the admissible variations V: stick cells move freely, slip cells only rotate on their
-        # disc (tangent direction e_perp, scaled by the limit), other cells not at all
-        if scalar:
-            perp = np.zeros_like(direction)
-        else:
-            # rotations stiffer than the cell's own elastic stiffness are left to the projection
-            # update below (their slip direction is well defined); soft ones go into the CG
-            soft = slip & (curvature * k0 <= _SOFT)
-            perp = np.stack([-direction[1], direction[0]]) * soft
-        gram = stick.sum() * eye
-        if not scalar:
-            gram = gram + np.einsum("iyx,jyx->ij", perp, perp)
-
-        def project(x: np.ndarray, constrain: bool = force_control, stick=stick, perp=perp,
-                    gram=gram) -> np.ndarray:
-            y = np.where(stick, x, 0.0)
-            if not scalar:
-                y += (x * perp).sum(axis=0) * perp
-            if constrain:
-                lam = np.linalg.lstsq(gram, y.reshape(ncomp, -1).sum(axis=1), rcond=None)[0]
-                y -= np.where(stick, lam[:, None, None], 0.0)
-                if not scalar:
-                    y -= (lam[:, None, None] * perp).sum(axis=0) * perp
-            return y
-
-        tau = np.where(slip, limit * direction, tau)
-        tau[:, ~contact] = 0.0
-        if force_control:
-            if not stick.any():
-                return None
-            mismatch = force[:ncomp] / dA - tau.reshape(ncomp, -1).sum(axis=1)
-            tau[:, stick] += (mismatch / stick.sum())[:, None]
-        du = apply(tau - tau0)
-        # the CG stops on the displacement residual in the Coulomb residual's own units
-        # (k₀ μ max p): a stick cell's error w/k₀ is then below tol·μ max p
-        scale = max(k0 * float(limit.max()), 1e-300)
-
-        def shift_estimate(du: np.ndarray, gram=gram, project=project) -> np.ndarray:
-            # the multiplier of the force constraint: Σ P_i (ds + rigid_i - du_i) = 0
-            return np.linalg.lstsq(gram, project(du - rigid, False).reshape(ncomp, -1)
-                                   .sum(axis=1), rcond=None)[0]
-
-        if force_control:
-            ds = shift_estimate(du)
-        # symmetric diagonal scaling of the rotation dofs by (k₀ / (k₀ + c))^½: the Fourier
-        # preconditioner approximates K⁻¹ but the rotations see K + c
-        S = np.sqrt(k0 / (k0 + curvature)) if not scalar else 1.0
-        r = project(ds[:, None, None] + rigid - du)
-        # while the sets still change, an inexact solve (a fixed reduction of the residual) is
-        # enough to tell which cells move next
-        r_norm = float(np.abs(r).max())
-        target = max(inner_tol * scale, _ETA * r_norm if changing else 0.0)
-        if r_norm > target:
-            z = project(S * precondition(S * r))
-            t = z
-            rz = float(np.vdot(r, z))
-            for _inner in range(max_inner):
-                v = apply(t)
-                vs = project(v + curvature * t)
-                den = float(np.vdot(t, vs))
-                if not den > 0:
-                    break
-                alpha = rz / den
-                tau += alpha * t
-                du += alpha * v
-                r -= alpha * vs
-                iterations += 1
-                if np.abs(r).max() <= target:
-                    break
-                z = project(S * precondition(S * r))
-                rz_new = float(np.vdot(r, z))
-                t = z + (rz_new / rz) * t
-                rz = rz_new
-            else:
-                return None
-            if force_control:
-                ds = shift_estimate(du)
-        w = ds[:, None, None] + rigid - du               # relative slip of the plate
-        norm_tau = np.sqrt((tau * tau).sum(axis=0))
-        to_slip = stick & (norm_tau > limit)
-        along = (w * direction).sum(axis=0)
-        # a slip cell sticks again when its trial traction τ + w/k₀ falls inside its disc (the
-        # semismooth-Newton active set; `along < 0` alone reacts to every sign flip of a small w)
-        trial_in = ((tau + w / k0) ** 2).sum(axis=0) < limit**2
-        to_stick = slip & (along < 0) & trial_in
-        keep = slip & ~to_stick
-        # slip tractions rotated in the tangent plane go back on the circle; stiff ones follow
-        # the projection of the trial traction τ + w/k₀
-        if not scalar:
-            trial = np.where(soft, tau, tau + w / k0)
-        else:
-            trial = tau
-        norm_trial = np.sqrt((trial * trial).sum(axis=0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            unit = np.where(slip, trial / np.where(norm_trial > 0, norm_trial, 1.0),
-                            tau / np.where(norm_tau > 0, norm_tau, 1.0))
-        turned = float((limit * np.abs(unit - direction))[:, keep].max(initial=0.0))
-        turned /= max(float(limit.max()), 1e-300)
-        if _DEBUG:
-            print("outer", _outer, "stick", int(stick.sum()), "slip", int(slip.sum()),
-                  "to_slip", int(to_slip.sum()), "to_stick", int(to_stick.sum()),
-                  "turned", turned, "its", iterations)
-        changing = bool(to_slip.any() or to_stick.any())
-        # a cell on the stick/slip boundary can flip back and forth with no CG step in between
-        # (the residual is already below the target; seen in Spence's problem at 48² and 96²):
-        # when the sets return to one visited since the last CG step, test Coulomb's law as it
-        # stands
-        if iterations != iterations_before:
-            seen = set()
-        seen.add(slip.tobytes())
-        cycling = changing and ((slip & ~to_stick) | to_slip).tobytes() in seen
-        if (not changing or cycling) and turned <= inner_tol:
-            if inner_tol <= tol:
-                tau_f = np.where(slip, limit * unit, tau)
-                du_f = apply(tau_f - tau0)
-                if force_control:
-                    ds = shift_estimate(du_f)
-                w_f = np.where(contact & ~zero_limit, ds[:, None, None] + rigid - du_f, 0.0)
-                res = coulomb_residual(np.where(contact, tau_f, 0.0), w_f, limit, 1.0, k0)
-                if res <= tol or inner_tol < tol * 1e-3:
-                    return tau_f, du_f, ds, stick, iterations
-                inner_tol /= 10     # the stopping test was met but not Coulomb's law: tighten
-            else:
-                inner_tol = tol
-        direction = np.where(to_slip | keep, unit, direction)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            curvature = np.where(keep, np.sqrt((w * w).sum(axis=0)) / limit, 0.0)
-        slip = (slip & ~to_stick) | to_slip
-        stick = contact & ~slip & ~zero_limit
-    return None
-
-def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.ndarray,
-                  limit: np.ndarray, contact: np.ndarray, force: np.ndarray | None,
-                  shift: np.ndarray | None, tol: float, scalar: bool, max_outer: int,
-                  max_inner: int, initial: np.ndarray | None = None,
-                  rigid: np.ndarray | None = None):
-    """Coarse-to-fine cascade: the step is first solved (loosely) on a grid twice as coarse, whose
-    traction gives this level its starting stick/slip sets and slip directions. Most of the
-    active-set updates then happen where they are cheap."""
-    dx, dy = spacing
-    shape = contact.shape
-    if initial is None and min(shape) >= 2 * _COARSEST:
-        c_limit = restrict(limit)
-        c_contact = (restrict(contact.astype(float)) > 0) & (c_limit > 0)
-        c_tau0 = np.stack([restrict(t) for t in tau0])
-        c_rigid = None if rigid is None else np.stack([restrict(r) for r in rigid])
-        coarse = _solve_levels((2 * dx, 2 * dy), G, nu, c_tau0, c_limit, c_contact, force,
-                               shift, max(tol, 1e-4), scalar, max_outer, max_inner,
-                               rigid=c_rigid)
-        if coarse is not None:
-            # fine cells under a coarse slip cell start slipping in its direction, on their own
-            # (finer) friction limit; the others take the coarse traction
-            c_tau = coarse[0]
-            c_norm = np.sqrt((c_tau * c_tau).sum(axis=0))
-            c_slip = c_contact & (c_norm >= c_limit * (1 - 1e-6))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                c_dir = np.where(c_slip, c_tau / np.where(c_norm > 0, c_norm, 1.0), 0.0)
-            slip = prolong(c_slip.astype(float), shape) > 0.5
-            initial = np.zeros((2, *shape))
-            for k in range(c_tau.shape[0]):
-                initial[k] = np.where(slip, limit * prolong(c_dir[k], shape),
-                                      prolong(c_tau[k], shape))
-    K = tangential_operator(shape, spacing, G, nu)
-    return _active_set(K, tau0, limit, contact, dx * dy, force, shift, tol, scalar, max_outer,
-                       max_inner, initial, rigid)
 
 
 def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None,
@@ -562,13 +313,15 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         # displacement that releases on the box counts like a motion of the plate
         released = K(outside)[cells]
         rigid_box = released if rigid_box is None else rigid_box + released
-    out = _solve_levels(grid.spacing, mat.G, mat.nu, tau0[cells], limit[box],
-                        contact[box], Q, ds_prescribed, tol, scalar, max_outer, max_iter,
-                        None if _initial is None else _initial[cells], rigid_box)
+    window = WindowStep(grid.spacing, tau0[cells], limit[box], contact[box], force=Q,
+                        shift=ds_prescribed, rigid=rigid_box)
+    out = solve_on_levels(window, mat.G, mat.nu, tol,
+                          start=None if _initial is None else _initial[cells], scalar=scalar,
+                          max_outer=max_outer, max_inner=max_iter)
     failure = ("tangential solver did not converge (stick/slip set or slip directions kept "
                "changing); try a smaller load increment")
     if out is not None:
-        tau_b, _, ds, _, iterations = out
+        tau_b, ds, iterations = out.traction, out.shift, out.iterations
         ncomp = tau_b.shape[0]
         tau = np.zeros((2, *grid.shape))
         tau[(slice(ncomp), *box)] = tau_b
@@ -651,8 +404,8 @@ def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
     tau_full[:, ~normal.contact] = 0.0
     tau0 = np.zeros_like(tau_full)
     if previous is not None:
-        tau0 = _project_on_discs(np.where(normal.contact, previous.traction, 0.0),
-                                 mu * normal.pressure)
+        tau0 = project_on_discs(np.where(normal.contact, previous.traction, 0.0),
+                                mu * normal.pressure)
     du = K(tau_full - tau0)
     s_hi = max(float((du * e[:, None, None]).sum(axis=0)[normal.contact].max()), 1e-300)
     s_perp = 0.0
