@@ -42,7 +42,7 @@ from .grid import Grid, coarse_grid, embed, fast_span, prolong, restrict
 from .normal import ContactAtEdgeError, ConvergenceError, _kkt, solve_normal
 from .operator import coupling_operator, surface_displacements
 from .pair import ElasticPair
-from .tangential import TangentialContact, restart_traction, solve_tangential
+from .tangential import TangentialContact, restart_traction, solve_tangential_from
 
 __all__ = ["solve_coupled"]
 
@@ -168,8 +168,9 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
                               initial=p_guess, traction=tau)
         if last is not None:
             tau_guess = restart_traction(*last, normal, mu)
-        step = solve_tangential(normal, mu, coupling=True, previous_pressure=previous_pressure,
-                                tol=sub_tol, _initial=tau_guess, **tangential)
+        step = solve_tangential_from(tau_guess, normal, mu, coupling=True,
+                                     previous_pressure=previous_pressure, tol=sub_tol,
+                                     **tangential)
         if not pair.coupled:
             return replace(step, coupling_passes=1)
         # the coupled residual: this pass's normal solve saw the shear of the last pass, so its

@@ -14,12 +14,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..bem import ContactAtEdgeError, ConvergenceError, TangentialContact
-from ..bem.tangential import restart_traction
 from ..loading import LoadStep
 from ..orientation import Rotation, decompose, key
 from ..records import StepMaps, StepRecord
 from ..rigid import RigidState
-from .interface import InterfaceNormal, Window, remap
+from .interface import InterfaceNormal, Window
 from .model import Particle, Plates
 from .statics import Evaluation, PairStatics
 from .surface import LOWER, UPPER
@@ -180,16 +179,10 @@ class Member:
         out = {}
         for side, sol, sign, mu in sides:
             force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
-            initial = None
-            if warm and side in warm:
-                # the last coupled pass's step starts this one (see restart_traction)
-                window, last = warm[side]
-                initial = restart_traction(remap(last.traction, window, sol.window),
-                                           remap(last.slip, window, sol.window) > 0.5,
-                                           sol.contact, mu)
+            # the last coupled pass's step (if any) starts this one
             out[side] = self.interfaces[side].solve_tangential(
                 sol, mu, force, history.get(side), twist=twist, coupling=self.coupling,
-                _initial=initial)
+                restart=warm.get(side) if warm else None)
         return out
 
     def _shear(self, ev: Evaluation,
