@@ -665,3 +665,28 @@ def test_a_callback_sees_every_outer_pass_and_changes_nothing():
     assert status == "converged" and last.iterations == t.iterations
     assert [p.number for p, _ in passes if p.shape == last.shape] == \
         list(range(1, shapes.count(last.shape) + 1))
+
+
+def test_converged_says_whether_the_residual_meets_tol():
+    """``converged`` is the Coulomb residual against the requested tol: a step whose residual
+    lies between tol and 10 tol is returned as not converged, one within tol as converged,
+    one beyond 10 tol raises; the closed forms (full sliding) report True whatever their
+    residual."""
+    import thirdbody.bem.tangential as tangential
+    from thirdbody.bem.normal import ConvergenceError
+
+    _, _, normal = setup(32, 0.3)
+    t = solve_tangential(normal, MU, force=0.5 * MU * W)
+    assert t.converged and 0 < t.residual <= 1e-8
+    step, _, _ = tangential._validated(normal, MU, **{**tangential._OPTIONS,
+                                                      "force": 0.5 * MU * W})
+
+    def finish(tol, **kwargs):
+        return tangential._finish(step, t.traction, t.shift, t.iterations, tol, **kwargs)
+
+    assert finish(2 * t.residual).converged
+    assert not finish(0.5 * t.residual).converged
+    with pytest.raises(ConvergenceError):
+        finish(0.05 * t.residual)
+    full = solve_tangential(normal, MU, force=MU * W)
+    assert full.converged and full.residual > 1e-8

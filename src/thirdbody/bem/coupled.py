@@ -272,7 +272,8 @@ def _on_whole_window(inner: TangentialContact, box, gap: np.ndarray, grid: Grid,
     if not residual < tol:
         return None
     whole = replace(normal, pressure=p, displacement=u_z, contact=contact, gap=gap, grid=grid,
-                    traction=None if normal.traction is None else used, residual=residual)
+                    traction=None if normal.traction is None else used, residual=residual,
+                    converged=True)         # residual < tol, checked above
     return replace(inner, traction=tau, displacement=u_t,
                    stick=embed(inner.stick, box, grid.shape),
                    slip=embed(inner.slip, box, grid.shape),

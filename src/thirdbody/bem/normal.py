@@ -74,8 +74,14 @@ class NormalContact:
     iterations : int
         Conjugate-gradient iterations on the finest level.
     residual : float
-        Complementarity residual max(|s| on contact, max(-s, 0) elsewhere) / max(displacement).
+        Complementarity residual max(|s| on contact, max(-s, 0) elsewhere) / max(displacement),
+        recomputed from the returned fields.
     converged : bool
+        Whether ``residual`` is below the requested ``tol``. A solve that does not get there
+        raises :class:`ConvergenceError`, with one allowance: the iteration updates the
+        displacement incrementally, and a fresh product may differ from it; a residual up to 10
+        times the iteration's own (itself below ``tol``) is accepted, and reported with
+        ``converged`` False.
     methods : tuple[str, ...]
         Names of the published methods used (see :func:`thirdbody.citations`).
     traction : (2, ny, nx) array or None
@@ -480,8 +486,10 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material | ElasticPair, 
         contact = p > 0
         d = res.delta
         residual = _kkt(g + u - d, contact, float(u.max()))
-    converged = residual < max(tol, 10 * res.residual) and res.residual < tol
-    if not converged:
+    converged = bool(residual < tol)
+    # the fresh residual may exceed the iteration's own by the drift of its incremental
+    # displacement update: accepted up to 10 times that (itself below tol), not converged
+    if not ((converged or residual < 10 * res.residual) and res.residual < tol):
         raise ConvergenceError(
             f"normal solver did not converge: residual {residual:.3e} > tol {tol:.1e} after "
             f"{res.iterations} iterations (raise max_iter or tol)")
@@ -494,5 +502,5 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material | ElasticPair, 
         u = u + coupled
     return NormalContact(pressure=p, displacement=u, contact=contact, gap=np.asarray(gap),
                          grid=grid, pair=pair, approach=d + g0, force=total,
-                         iterations=res.iterations, residual=residual, converged=True,
+                         iterations=res.iterations, residual=residual, converged=converged,
                          traction=traction)

@@ -80,6 +80,12 @@ class TangentialContact:
         the projection on the friction disc and k₀ the self-compliance: zero iff every cell
         obeys stick or slip exactly.
     converged : bool
+        Whether ``residual`` is within the requested ``tol``. An iterative step is accepted up
+        to 10 ``tol`` (the active set stops when its inner tolerance has fallen a thousandfold
+        below ``tol`` without meeting it) and then reported with ``converged`` False; beyond
+        that the solver raises :class:`~thirdbody.bem.ConvergenceError`. The closed forms (full
+        sliding, frictionless) iterate nothing and report True: their residual is what the
+        closed form leaves (in full sliding the slip need not be parallel to μp e everywhere).
     full_sliding : bool
         Every contact cell slides (|τ| = μp everywhere).
     twist : float
@@ -489,5 +495,6 @@ def _finish(step: _Step, tau: np.ndarray, ds: np.ndarray, iterations: int, tol: 
         traction=tau, displacement=displacement, shift=step.prev_shift + ds,
         force=step.force_of(tau), stick=stick, slip=slip,
         slip_increment=w, mu=float(mu), normal=normal, iterations=iterations,
-        residual=residual, converged=True, full_sliding=bool(full or not stick.any()),
+        residual=residual, converged=bool(full or residual <= tol),
+        full_sliding=bool(full or not stick.any()),
         twist=step.twist, twist_centre=step.twist_centre)
