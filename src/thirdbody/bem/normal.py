@@ -224,11 +224,11 @@ def _active_set_pcg(g: np.ndarray, K, dA: float, force: float | None, delta: flo
     (:meth:`~thirdbody.bem.operator.NormalOperator.precondition`), projected on Σp = const in
     force control. The preconditioner must not be the inverse of the zero-padded kernel's
     spectrum: that kernel is cut off at the window's size, so its inverse is wrong at the
-    wavelengths of a contact that fills its candidate box, and the count then tripled per
-    refinement (25, 51, 156, 451 CG iterations on a fixed set at 128² to 1024², ellipse
-    R_x/R_y = 3.4). With the lattice symbol it is 9 to 12 (measured, ``tests/test_normal.py``).
-    The loose stage (residual 1e-5) lets the set settle before the tight one, so few cells
-    change status at the 1e-8 stage, where each change restarts the CG. The set is then updated:
+    wavelengths of a contact that fills its candidate box, and the iteration count then grows
+    with each refinement; with the lattice symbol it stays nearly constant
+    (``tests/test_normal.py`` holds it to a bound). The loose stage (residual 1e-5) lets the
+    set settle before the tight one, so few cells change status at the 1e-8 stage, where each
+    change restarts the CG. The set is then updated:
     cells with p < 0 leave, cells with s < 0 join. Returns None if the set does not settle, so the
     caller can fall back to Polonsky-Keer.
     """
@@ -255,8 +255,8 @@ def _active_set_pcg(g: np.ndarray, K, dA: float, force: float | None, delta: flo
         r_max = float(np.abs(r).max())
         target = max(inner_tol * scale, _ETA * r_max if changing else 0.0)
         if r_max > target:
-            # masks as 0/1 weights and sums instead of boolean indexing: at 128² the array
-            # bookkeeping, not the FFTs, was half of the time
+            # masks as 0/1 weights and sums instead of boolean indexing: on small windows the
+            # bookkeeping of boolean indexing costs as much as the FFTs
             w = S.astype(float)
             n_set = float(w.sum())
 

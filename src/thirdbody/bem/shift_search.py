@@ -241,10 +241,10 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
 def _bracket_factor(f: float, q: float, cap: float, jump: int) -> float:
     """How far to move the shift (a factor on it) after a solve that transmits too little force
     (f = F·e − q < 0) to bracket the root. Near full sliding the deficit μF_N − F·e falls like
-    1/(s − s₀)² with s₀ >= 0 (see :func:`_root`; measured local exponents 3.5 down to 2.0 on
-    the coupled Fig. 3 run), so s (deficit / (μF_N − q))^½, the root if s₀ were 0, is at or
-    beyond it: a bracket with one solve where doubling took 1-5. Later jumps at least double
-    the shift, so a force that bends over differently is still bracketed."""
+    1/(s − s₀)² with s₀ >= 0 (see :func:`_root`), or faster, so s (deficit / (μF_N − q))^½,
+    the root if s₀ were 0, is at or beyond it: a bracket usually with one solve, where
+    doubling the shift takes several. Later jumps at least double the shift, so a force that
+    bends over differently is still bracketed."""
     factor = 2.0
     if cap > q:
         factor = _BRACKET_MARGIN / (_straightened(q + f, q, cap) + 1.0)
@@ -285,10 +285,10 @@ def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_
     f = F·e − q): Brent's method (scipy's brentq), stopped as soon as |f| <= ftol. Near full
     sliding every cell slips at an angle ~ b_i / (s − s_i) to e, so the deficit μF_N − F·e
     (``cap`` − F·e) falls like 1/(s − s₀)²; the search runs on s against
-    (μF_N − q)^½ / (μF_N − F·e)^½ − 1, which is then a straight line through the root: one
-    or two solves inside the bracket (the Illinois method on (s, f) took 8-11 solves, Brent on
-    log s against log(μF_N − F·e) 3). Returns the step, or None if the bracket holds no root
-    to ftol."""
+    (μF_N − q)^½ / (μF_N − F·e)^½ − 1, which is then a straight line through the root, so
+    the root is found in few solves inside the bracket (fewer than the Illinois method on
+    (s, f) or Brent on log s against log(μF_N − F·e)). Returns the step, or None if the
+    bracket holds no root to ftol."""
     from scipy.optimize import brentq
 
     if abs(f_hi) <= ftol:

@@ -14,8 +14,7 @@ Equivalently τ minimises ½ (τ-τ⁰)ᵀ K (τ-τ⁰) - Δs·Σ(τ-τ⁰)ΔA o
 force Q the constraint Σ τ ΔA = Q replaces Δs, which becomes its multiplier. τ⁰ is the previous
 traction as it was, not projected on the new discs first (DESIGN.md §4 projects it): where the
 pressure fell, the projection would release a displacement K (τ⁰ − Π τ⁰) that no cell counts as
-slip, so the stick cells would not follow the plate (measured: off by 78-93 % of the step's
-displacement when the normal load drops to 0.8 or 0.3 of its value).
+slip, so the stick cells would not follow the plate.
 
 This module holds the step's result (:class:`TangentialContact`) and :func:`solve_tangential`,
 which validates its inputs and dispatches to one function per case: full sliding, frictionless,
