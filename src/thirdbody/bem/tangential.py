@@ -224,10 +224,11 @@ def solve_tangential(normal: NormalContact, mu: float, *,
     pressure and the pressure does not move the surface tangentially: exact for ν = 0.5
     against a rigid plate. :func:`thirdbody.bem.solve_coupled` alternates the two problems.
     """
-    return solve_tangential_from(
-        None, normal, mu, force=force, shift=shift, previous=previous, tol=tol, scalar=scalar,
+    step, force, shift = _validated(
+        normal, mu, force=force, shift=shift, previous=previous, tol=tol, scalar=scalar,
         max_outer=max_outer, max_iter=max_iter, twist=twist, twist_centre=twist_centre,
         coupling=coupling, previous_pressure=previous_pressure, callback=callback)
+    return _dispatch(step, force, shift, start=None)
 
 
 #: the keyword arguments of :func:`solve_tangential` and their defaults
@@ -244,6 +245,13 @@ def solve_tangential_from(start: np.ndarray | None, normal: NormalContact, mu: f
     from :func:`restart_traction`. None: as :func:`solve_tangential`. The start changes the
     iteration, not what is accepted: the same checks apply."""
     step, force, shift = _validated(normal, mu, **{**_OPTIONS, **options})
+    return _dispatch(step, force, shift, start)
+
+
+def _dispatch(step: _Step, force: np.ndarray | None, shift: np.ndarray | None,
+              start: np.ndarray | None) -> TangentialContact:
+    """The case the load makes of the step, solved: ``force`` (2,), N, or the total ``shift``
+    (2,), m."""
     if force is None:
         return _shift_control(step, shift, start)
     q = float(np.hypot(*force))
