@@ -243,7 +243,7 @@ class ActiveSet:
         # slip sets visited since the last CG step; a return to one of them is a cycle
         self.seen: set[bytes] = set()
         self.outer = 0
-        self.last_pass: OuterPass | None = None
+        self._pass: tuple | None = None
         self.status, self.message = "running", ""
         self._answer: ActiveSetResult | None = None
 
@@ -301,9 +301,7 @@ class ActiveSet:
                             tau / np.where(norm_tau > 0, norm_tau, 1.0))
         turned = float((limit * np.abs(unit - direction))[:, keep].max(initial=0.0))
         turned /= max(float(limit.max()), 1e-300)
-        self.last_pass = OuterPass(self.outer, contact.shape, int(stick.sum()), int(slip.sum()),
-                                   int(to_slip.sum()), int(to_stick.sum()), turned,
-                                   self.iterations)
+        self._pass = (self.outer, stick, slip, to_slip, to_stick, turned, self.iterations)
         self.changing = changing = bool(to_slip.any() or to_stick.any())
         # a cell on the stick/slip boundary can flip back and forth with no CG step in between
         # (the residual is already below the target; seen in Spence's problem at 48² and 96²):
@@ -347,6 +345,15 @@ class ActiveSet:
         self.setup(window, tol, start)
         self.run()
         return self.finalize()
+
+    @property
+    def last_pass(self) -> OuterPass | None:
+        """What the last complete outer pass saw and decided (None before the first)."""
+        if self._pass is None:
+            return None
+        number, stick, slip, to_slip, to_stick, turned, iterations = self._pass
+        return OuterPass(number, stick.shape, int(stick.sum()), int(slip.sum()),
+                         int(to_slip.sum()), int(to_stick.sum()), turned, iterations)
 
     # --- parts of a pass --------------------------------------------------------------------
     def _apply(self, t: np.ndarray) -> np.ndarray:
