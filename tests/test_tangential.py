@@ -83,18 +83,17 @@ def test_converges_at_the_verge_of_sliding(nu):
 
 def _count_shift_solves(monkeypatch) -> list:
     """Record the shifts of the shift-controlled solves the force-control fallback makes (the
-    calls it makes through the module's solve_tangential; the test's own call is not one)."""
+    calls it makes through the module's _shift_control; the test's own call is not one)."""
     import thirdbody.bem.tangential as tangential
 
     solves = []
-    solve = tangential.solve_tangential
+    solve = tangential._shift_control
 
-    def count(*args, **kwargs):
-        if kwargs.get("shift") is not None:
-            solves.append(kwargs["shift"])
-        return solve(*args, **kwargs)
+    def count(step, shift, start=None):
+        solves.append(shift)
+        return solve(step, shift, start)
 
-    monkeypatch.setattr(tangential, "solve_tangential", count)
+    monkeypatch.setattr(tangential, "_shift_control", count)
     return solves
 
 
@@ -142,10 +141,10 @@ def test_the_shift_search_turns_the_shift_to_meet_an_oblique_force(monkeypatch, 
     direction. Broyden's method on the force's magnitude and angle does it in 7-11 solves in
     all; its fallback (a secant step across Q, then a new root along it) took 12-20 and must
     still get there."""
-    import thirdbody.bem.tangential as tangential
+    import thirdbody.bem.shift_search as shift_search
 
     if not broyden:
-        monkeypatch.setattr(tangential, "_BROYDEN_STEPS", 0)
+        monkeypatch.setattr(shift_search, "_BROYDEN_STEPS", 0)
     normal = _turned_ellipse()
     e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
     Q = fraction * MU * W_ELLIPSE * e
@@ -169,24 +168,25 @@ def test_the_shift_search_gives_the_force_controlled_step(monkeypatch, warm_fail
     the force-controlled active set returns, to the solvers' tolerance. It does so also when
     every warm-started solve fails (it then solves them from scratch)."""
     import thirdbody.bem.tangential as tangential
+    from thirdbody.bem.shift_search import force_by_shift
 
     normal = _turned_ellipse()
     first = solve_tangential(normal, MU, force=0.3 * MU * W_ELLIPSE)
     e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
     Q = 0.5 * MU * W_ELLIPSE * e
     by_force = solve_tangential(normal, MU, force=Q, previous=first)
+    solve = shift_control = tangential._shift_control
     if warm_fails:
-        solve = tangential.solve_tangential
 
-        def cold_only(*args, **kwargs):
-            if kwargs.get("_initial") is not None:
+        def cold_only(step, shift, start=None):
+            if start is not None:
                 raise tangential.ConvergenceError("a warm start that fails")
-            return solve(*args, **kwargs)
+            return shift_control(step, shift, start)
 
-        monkeypatch.setattr(tangential, "solve_tangential", cold_only)
-    by_shift = tangential._force_by_shift(
-        normal, MU, Q, first, np.asarray(first.shift), 1e-8, False, 60, 500, "",
-        {"twist": 0.0, "twist_centre": (0.0, 0.0)}, {"coupling": False, "previous_pressure": None})
+        solve = cold_only
+    step, _, _ = tangential._validated(normal, MU, **{**tangential._OPTIONS, "force": Q,
+                                                      "previous": first})
+    by_shift = force_by_shift(step, Q, "", solve)
     assert by_force.stick.sum() > 0 and np.abs(first.shift).max() > 0
     np.testing.assert_allclose(by_shift.force, Q, rtol=0, atol=1e-8 * np.hypot(*Q))
     np.testing.assert_allclose(by_shift.shift, by_force.shift, rtol=1e-6)
@@ -402,11 +402,11 @@ def test_unloading_at_the_verge_of_sliding_moves_the_plate_back(monkeypatch, ell
     force at 20° (there with Broyden's correction of the shift's angle and with its fallback):
     the force is met to 1e-8, and every cell slips against the plate: with the slip
     w = Δs − (u − u_before) summed cell by cell, τ = μp w/|w| in every contact cell."""
-    import thirdbody.bem.tangential as tangential
+    import thirdbody.bem.shift_search as shift_search
     from _summation import summed
 
     if not broyden:
-        monkeypatch.setattr(tangential, "_BROYDEN_STEPS", 0)
+        monkeypatch.setattr(shift_search, "_BROYDEN_STEPS", 0)
     if ellipse:
         normal = _turned_ellipse()
         e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
@@ -604,21 +604,22 @@ def test_a_wrong_answer_from_the_active_set_is_never_returned(monkeypatch):
     """The solver's answer is checked against Coulomb's law with displacements recomputed from
     the traction: an active-set solution spoiled after the fact (every stick traction 1 %
     off) raises ConvergenceError, in force control and in displacement control."""
-    from thirdbody.bem import tangential
+    from dataclasses import replace
+
+    from thirdbody.bem.active_set import ActiveSet
     from thirdbody.bem.normal import ConvergenceError
 
     _, _, normal = setup(32, 0.3)
     good = solve_tangential(normal, MU, force=0.5 * MU * W)
-    solve = tangential._active_set
+    finalize = ActiveSet.finalize
 
-    def spoiled(*args, **kwargs):
-        out = solve(*args, **kwargs)
+    def spoiled(self):
+        out = finalize(self)
         if out is None:
             return None
-        tau, du, ds, stick, iterations = out
-        return np.where(stick, 1.01 * tau, tau), du, ds, stick, iterations
+        return replace(out, traction=np.where(out.stick, 1.01 * out.traction, out.traction))
 
-    monkeypatch.setattr(tangential, "_active_set", spoiled)
+    monkeypatch.setattr(ActiveSet, "finalize", spoiled)
     with pytest.raises(ConvergenceError, match="Coulomb residual"):
         solve_tangential(normal, MU, shift=good.shift)
     with pytest.raises(ConvergenceError):
@@ -629,17 +630,63 @@ def test_a_force_missed_by_the_active_set_is_never_returned(monkeypatch):
     """The force, like Coulomb's law, is checked from the tractions: an active set handed a
     force 1 % off (an answer that obeys Coulomb's law for the wrong load) is not returned;
     the shift search takes over and meets the prescribed force."""
-    from thirdbody.bem import tangential
+    from dataclasses import replace
+
+    from thirdbody.bem.active_set import ActiveSet
 
     _, _, normal = setup(32, 0.3)
-    solve = tangential._active_set
+    setup_active_set = ActiveSet.setup
 
-    def misled(K, tau0, limit, contact, dA, force, *args, **kwargs):
-        force = None if force is None else 1.01 * np.asarray(force)
-        return solve(K, tau0, limit, contact, dA, force, *args, **kwargs)
+    def misled(self, window, *args, **kwargs):
+        force = None if window.force is None else 1.01 * np.asarray(window.force)
+        return setup_active_set(self, replace(window, force=force), *args, **kwargs)
 
-    monkeypatch.setattr(tangential, "_active_set", misled)
+    monkeypatch.setattr(ActiveSet, "setup", misled)
     t = solve_tangential(normal, MU, force=(0.5 * MU * W, 0.1 * MU * W))
     check_coulomb(t)
     np.testing.assert_allclose(t.force, (0.5 * MU * W, 0.1 * MU * W), rtol=0,
                                atol=1e-8 * MU * W)
+
+
+def test_a_callback_sees_every_outer_pass_and_changes_nothing():
+    """``callback`` is called with the active-set solver after each outer pass, on every level
+    of the coarse-to-fine cascade (coarse boxes first): the passes count from 1 in each solve,
+    the last one is the finest box's and converged, and it reports the step's CG iterations.
+    The step is the one solved without a callback, bit for bit."""
+    _, _, normal = setup(128, 0.3)
+    passes = []
+    t = solve_tangential(normal, MU, force=0.5 * MU * W,
+                         callback=lambda solver: passes.append((solver.last_pass, solver.status)))
+    plain = solve_tangential(normal, MU, force=0.5 * MU * W)
+    assert np.array_equal(t.traction, plain.traction) and t.iterations == plain.iterations
+    shapes = [p.shape for p, _ in passes]
+    assert len(set(shapes)) >= 2 and shapes[0] != shapes[-1]      # a coarse level, then the box
+    last, status = passes[-1]
+    assert status == "converged" and last.iterations == t.iterations
+    assert [p.number for p, _ in passes if p.shape == last.shape] == \
+        list(range(1, shapes.count(last.shape) + 1))
+
+
+def test_converged_says_whether_the_residual_meets_tol():
+    """``converged`` is the Coulomb residual against the requested tol: a step whose residual
+    lies between tol and 10 tol is returned as not converged, one within tol as converged,
+    one beyond 10 tol raises; the closed forms (full sliding) report True whatever their
+    residual."""
+    import thirdbody.bem.tangential as tangential
+    from thirdbody.bem.normal import ConvergenceError
+
+    _, _, normal = setup(32, 0.3)
+    t = solve_tangential(normal, MU, force=0.5 * MU * W)
+    assert t.converged and 0 < t.residual <= 1e-8
+    step, _, _ = tangential._validated(normal, MU, **{**tangential._OPTIONS,
+                                                      "force": 0.5 * MU * W})
+
+    def finish(tol, **kwargs):
+        return tangential._finish(step, t.traction, t.shift, t.iterations, tol, **kwargs)
+
+    assert finish(2 * t.residual).converged
+    assert not finish(0.5 * t.residual).converged
+    with pytest.raises(ConvergenceError):
+        finish(0.05 * t.residual)
+    full = solve_tangential(normal, MU, force=MU * W)
+    assert full.converged and full.residual > 1e-8

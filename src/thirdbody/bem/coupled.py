@@ -13,8 +13,8 @@ tangential displacement added to the slip), until the coupled residual (the sepa
 left by the shear the normal solve did not see) is below ``coupling_tol``. Why this and not a
 monolithic solve: each half is a problem the existing solvers handle with their own
 preconditioners, active sets and force constraints, and the alternation is a contraction whose
-rate is set by β and μ: the coupled residual falls ~10x per pass (measured 3.4e-5, 2.3e-6,
-1.9e-7, 1.5e-8 on a Cattaneo step at ν = 0.3, μ = 0.3). Three measures keep it cheap:
+rate is set by β and μ: the coupled residual falls by a roughly steady factor per pass. Three
+measures keep it cheap:
 
 * the first passes, where the fields still move a lot, run on a grid twice as coarse
   (recursively), whose pressure and shear start the fine passes;
@@ -38,18 +38,11 @@ import numpy as np
 
 from .._citations import cites
 from ..material import Material
-from .grid import Grid
-from .normal import (
-    ContactAtEdgeError,
-    ConvergenceError,
-    _kkt,
-    _prolong,
-    _restrict,
-    solve_normal,
-)
+from .grid import Grid, coarse_grid, embed, fast_span, prolong, restrict
+from .normal import ContactAtEdgeError, ConvergenceError, _kkt, solve_normal
 from .operator import coupling_operator, surface_displacements
 from .pair import ElasticPair
-from .tangential import TangentialContact, _fast_span, restart_traction, solve_tangential
+from .tangential import TangentialContact, restart_traction, solve_tangential_from
 
 __all__ = ["solve_coupled"]
 
@@ -154,9 +147,9 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
         whole = _on_whole_window(inner, box, gap, grid, pair, tol)
         if whole is not None:
             return whole
-        p_guess = _embed(inner.normal.pressure, box, grid.shape)
-        tau = _embed(inner.traction, box, grid.shape)
-        last = (tau, _embed(inner.slip, box, grid.shape))
+        p_guess = embed(inner.normal.pressure, box, grid.shape)
+        tau = embed(inner.traction, box, grid.shape)
+        last = (tau, embed(inner.slip, box, grid.shape))
         history = list(inner.coupling_changes)
         sub_tol = tol
     elif pair.coupled and initial is None and min(grid.shape) >= _COARSEST \
@@ -165,18 +158,19 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
         coarse = _coarse_step(gap, grid, pair, mu, force, approach, tangential_force, shift,
                               previous, previous_pressure, twist, twist_centre, tol,
                               coupling_tol, max_passes)
-        p_guess = _prolong(coarse.normal.pressure, grid.shape)
-        tau = np.stack([_prolong(t, grid.shape) for t in coarse.traction])
+        p_guess = prolong(coarse.normal.pressure, grid.shape)
+        tau = np.stack([prolong(t, grid.shape) for t in coarse.traction])
         # its stick/slip sets and slip directions start the first tangential solve too (instead
         # of that solver's own uncoupled coarse-to-fine start)
-        last = (tau, _prolong(coarse.slip.astype(float), grid.shape) > 0.5)
+        last = (tau, prolong(coarse.slip.astype(float), grid.shape) > 0.5)
     for passes in range(len(history) + 1, int(max_passes) + 1):
         normal = solve_normal(gap, grid, pair, force=force, approach=approach, tol=sub_tol,
                               initial=p_guess, traction=tau)
         if last is not None:
             tau_guess = restart_traction(*last, normal, mu)
-        step = solve_tangential(normal, mu, coupling=True, previous_pressure=previous_pressure,
-                                tol=sub_tol, _initial=tau_guess, **tangential)
+        step = solve_tangential_from(tau_guess, normal, mu, coupling=True,
+                                     previous_pressure=previous_pressure, tol=sub_tol,
+                                     **tangential)
         if not pair.coupled:
             return replace(step, coupling_passes=1)
         # the coupled residual: this pass's normal solve saw the shear of the last pass, so its
@@ -252,11 +246,11 @@ def _contact_estimate(gap, grid: Grid, pair: ElasticPair, force, approach) -> np
     """Where the contact will be, roughly: the uncoupled contact solved loosely on a grid twice
     as coarse, on this grid's cells (None: the coarse solve failed; the whole window decides)."""
     try:
-        estimate = solve_normal(_restrict(gap), _coarse_grid(grid), pair, force=force,
+        estimate = solve_normal(restrict(gap), coarse_grid(grid), pair, force=force,
                                 approach=approach, tol=1e-4)
     except (ContactAtEdgeError, ConvergenceError, ValueError):
         return None         # ValueError: an approach that misses the coarse gap
-    return _prolong(estimate.contact.astype(float), grid.shape) > 0
+    return prolong(estimate.contact.astype(float), grid.shape) > 0
 
 
 def _on_whole_window(inner: TangentialContact, box, gap: np.ndarray, grid: Grid,
@@ -265,24 +259,25 @@ def _on_whole_window(inner: TangentialContact, box, gap: np.ndarray, grid: Grid,
     everywhere, and the normal complementarity checked on every cell (None if it fails: a
     contact outside the box)."""
     normal = inner.normal
-    p = _embed(normal.pressure, box, grid.shape)
-    tau = _embed(inner.traction, box, grid.shape)
+    p = embed(normal.pressure, box, grid.shape)
+    tau = embed(inner.traction, box, grid.shape)
     used = np.zeros_like(tau) if normal.traction is None \
-        else _embed(normal.traction, box, grid.shape)
+        else embed(normal.traction, box, grid.shape)
     u, u_shear, u_t = surface_displacements(grid.shape, grid.spacing, pair, p, tau, used)
     u_z = u + u_shear
     g = np.asarray(gap, dtype=float)
-    contact = _embed(normal.contact, box, grid.shape)
+    contact = embed(normal.contact, box, grid.shape)
     s = np.where(np.isfinite(g), g + u_z - normal.approach, np.inf)
     residual = _kkt(s, contact, float(u.max()))
     if not residual < tol:
         return None
     whole = replace(normal, pressure=p, displacement=u_z, contact=contact, gap=gap, grid=grid,
-                    traction=None if normal.traction is None else used, residual=residual)
+                    traction=None if normal.traction is None else used, residual=residual,
+                    converged=True)         # residual < tol, checked above
     return replace(inner, traction=tau, displacement=u_t,
-                   stick=_embed(inner.stick, box, grid.shape),
-                   slip=_embed(inner.slip, box, grid.shape),
-                   slip_increment=_embed(inner.slip_increment, box, grid.shape), normal=whole)
+                   stick=embed(inner.stick, box, grid.shape),
+                   slip=embed(inner.slip, box, grid.shape),
+                   slip_increment=embed(inner.slip_increment, box, grid.shape), normal=whole)
 
 
 def _box_around(mask: np.ndarray, cells: int, fraction: float) -> tuple[slice, slice]:
@@ -292,15 +287,9 @@ def _box_around(mask: np.ndarray, cells: int, fraction: float) -> tuple[slice, s
     for axis, n in enumerate(mask.shape):
         hits = np.flatnonzero(mask.any(axis=1 - axis))
         margin = max(cells, int(np.ceil(fraction * (hits[-1] + 1 - hits[0]))))
-        box.append(_fast_span(max(int(hits[0]) - margin, 0),
+        box.append(fast_span(max(int(hits[0]) - margin, 0),
                               min(int(hits[-1]) + 1 + margin, n), n))
     return box[0], box[1]
-
-
-def _embed(a: np.ndarray, box: tuple[slice, slice], shape: tuple[int, int]) -> np.ndarray:
-    out = np.zeros((*a.shape[:-2], *shape), dtype=a.dtype)
-    out[(..., *box)] = a
-    return out
 
 
 def _crop_step(step: TangentialContact, box, grid: Grid) -> TangentialContact:
@@ -316,32 +305,22 @@ def _crop_step(step: TangentialContact, box, grid: Grid) -> TangentialContact:
                    slip_increment=step.slip_increment[cells], normal=c_normal)
 
 
-def _coarse_grid(grid: Grid) -> Grid:
-    """The window with cells twice as large (2x2 blocks; an odd last row/column is padded)."""
-    nx, ny = grid.n
-    dx, dy = grid.spacing
-    cx, cy = grid.center
-    c_nx, c_ny = (nx + 1) // 2, (ny + 1) // 2
-    return Grid((c_nx, c_ny), (2 * dx, 2 * dy),
-                center=(cx + (c_nx - nx / 2) * dx, cy + (c_ny - ny / 2) * dy))
-
-
 def _coarse_step(gap, grid, pair, mu, force, approach, tangential_force, shift, previous,
                  previous_pressure, twist, twist_centre, tol, coupling_tol, max_passes):
     """The step on a grid of cells twice as large (2x2 averages of the gap, the history's
     traction and pressure), converged loosely: its fields start the fine passes."""
-    coarse = _coarse_grid(grid)
+    coarse = coarse_grid(grid)
     c_previous = c_pressure = None
     if previous_pressure is not None:
-        c_pressure = _restrict(previous_pressure)
+        c_pressure = restrict(previous_pressure)
     if previous is not None:
         normal = previous.normal
-        c_normal = replace(normal, pressure=_restrict(normal.pressure), grid=coarse,
-                           contact=_restrict(normal.contact.astype(float)) > 0)
-        c_previous = replace(previous, traction=np.stack([_restrict(t)
+        c_normal = replace(normal, pressure=restrict(normal.pressure), grid=coarse,
+                           contact=restrict(normal.contact.astype(float)) > 0)
+        c_previous = replace(previous, traction=np.stack([restrict(t)
                                                           for t in previous.traction]),
                              normal=c_normal)
-    return solve_coupled(_restrict(gap), coarse, pair, mu, force=force, approach=approach,
+    return solve_coupled(restrict(gap), coarse, pair, mu, force=force, approach=approach,
                          tangential_force=tangential_force, shift=shift, previous=c_previous,
                          previous_pressure=c_pressure, twist=twist, twist_centre=twist_centre,
                          tol=max(tol, 1e-6), coupling_tol=max(coupling_tol, 1e-4),

@@ -1,4 +1,10 @@
-"""Uniform windows of rectangular cells on which the boundary-element fields live."""
+"""Uniform windows of rectangular cells on which the boundary-element fields live, and the
+transfers between them: 2x2 coarsening and its piecewise-constant inverse (the solvers'
+coarse-to-fine starts), and boxes (sub-windows) cut out of a window and put back.
+
+Fields are cell-centre values in arrays of shape ``(ny, nx)`` (rows along y), or
+``(k, ny, nx)`` for k components; coordinates and spacings are in m.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +12,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.fft import next_fast_len
 
 
 def _pair(value, name: str, kind=int) -> tuple:
@@ -118,3 +125,74 @@ class Grid:
         with np.errstate(invalid="ignore"):
             gap = C * q / (1.0 + np.sqrt(1.0 - q))
         return np.where(q <= 1.0, gap, np.inf)
+
+
+def coarse_grid(grid: Grid) -> Grid:
+    """The window with cells twice as large (2x2 blocks; an odd last row/column is padded), the
+    grid of :func:`restrict`'s fields."""
+    nx, ny = grid.n
+    dx, dy = grid.spacing
+    cx, cy = grid.center
+    c_nx, c_ny = (nx + 1) // 2, (ny + 1) // 2
+    return Grid((c_nx, c_ny), (2 * dx, 2 * dy),
+                center=(cx + (c_nx - nx / 2) * dx, cy + (c_ny - ny / 2) * dy))
+
+
+def restrict(field: np.ndarray) -> np.ndarray:
+    """Average 2x2 blocks of a (ny, nx) field (an odd trailing row/column is repeated)."""
+    ny, nx = field.shape
+    if ny % 2 or nx % 2:
+        field = np.pad(field, ((0, ny % 2), (0, nx % 2)), mode="edge")
+    return 0.25 * (field[0::2, 0::2] + field[1::2, 0::2] + field[0::2, 1::2]
+                   + field[1::2, 1::2])
+
+
+def prolong(field: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """A coarse (ny, nx) field on the finer grid of ``shape``: each value on its 2x2 block."""
+    return np.kron(field, np.ones((2, 2)))[: shape[0], : shape[1]]
+
+
+def bounding_box(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
+    """(rows, columns) of the bounding box of ``mask`` widened by ``margin`` cells, rounded up
+    to a multiple of 8 cells (so operators are shared between calls) and kept inside the
+    window; the whole window if ``mask`` is empty."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    cols = np.flatnonzero(mask.any(axis=0))
+    ny, nx = mask.shape
+    if rows.size == 0:
+        return slice(0, ny), slice(0, nx)
+    j0, j1 = max(rows[0] - margin, 0), min(rows[-1] + 1 + margin, ny)
+    i0, i1 = max(cols[0] - margin, 0), min(cols[-1] + 1 + margin, nx)
+    j0, j1 = _round_up(j0, j1, ny)
+    i0, i1 = _round_up(i0, i1, nx)
+    return slice(j0, j1), slice(i0, i1)
+
+
+def _round_up(a: int, b: int, n: int) -> tuple[int, int]:
+    size = min(-(-(b - a) // 8) * 8, n)
+    b = min(a + size, n)
+    return b - size, b
+
+
+def fast_span(a: int, b: int, n: int) -> slice:
+    """Widen [a, b) inside [0, n) to a length whose FFTs are fast (5-smooth), if it fits."""
+    size = next_fast_len(b - a, real=True)
+    if size > n:
+        return slice(a, b)
+    lo = max(0, min(a - (size - (b - a)) // 2, n - size))
+    return slice(lo, lo + size)
+
+
+def outside(box: tuple[slice, slice], shape: tuple[int, int]) -> np.ndarray:
+    """The cells of a window of ``shape`` outside ``box``, a bool (ny, nx) mask."""
+    mask = np.ones(shape, dtype=bool)
+    mask[box] = False
+    return mask
+
+
+def embed(field: np.ndarray, box: tuple[slice, slice], shape: tuple[int, int]) -> np.ndarray:
+    """A field (..., ny_box, nx_box) on a box, on the whole window of ``shape`` (zero outside
+    the box)."""
+    out = np.zeros((*field.shape[:-2], *shape), dtype=field.dtype)
+    out[(..., *box)] = field
+    return out

@@ -28,7 +28,7 @@ import numpy as np
 
 from .._citations import cites
 from ..material import Material
-from .grid import Grid
+from .grid import Grid, bounding_box, outside, prolong, restrict
 from .operator import coupling_operator, normal_operator
 from .pair import ElasticPair
 
@@ -74,8 +74,14 @@ class NormalContact:
     iterations : int
         Conjugate-gradient iterations on the finest level.
     residual : float
-        Complementarity residual max(|s| on contact, max(-s, 0) elsewhere) / max(displacement).
+        Complementarity residual max(|s| on contact, max(-s, 0) elsewhere) / max(displacement),
+        recomputed from the returned fields.
     converged : bool
+        Whether ``residual`` is below the requested ``tol``. A solve that does not get there
+        raises :class:`ConvergenceError`, with one allowance: the iteration updates the
+        displacement incrementally, and a fresh product may differ from it; a residual up to 10
+        times the iteration's own (itself below ``tol``) is accepted, and reported with
+        ``converged`` False.
     methods : tuple[str, ...]
         Names of the published methods used (see :func:`thirdbody.citations`).
     traction : (2, ny, nx) array or None
@@ -218,11 +224,11 @@ def _active_set_pcg(g: np.ndarray, K, dA: float, force: float | None, delta: flo
     (:meth:`~thirdbody.bem.operator.NormalOperator.precondition`), projected on Σp = const in
     force control. The preconditioner must not be the inverse of the zero-padded kernel's
     spectrum: that kernel is cut off at the window's size, so its inverse is wrong at the
-    wavelengths of a contact that fills its candidate box, and the count then tripled per
-    refinement (25, 51, 156, 451 CG iterations on a fixed set at 128² to 1024², ellipse
-    R_x/R_y = 3.4). With the lattice symbol it is 9 to 12 (measured, ``tests/test_normal.py``).
-    The loose stage (residual 1e-5) lets the set settle before the tight one, so few cells
-    change status at the 1e-8 stage, where each change restarts the CG. The set is then updated:
+    wavelengths of a contact that fills its candidate box, and the iteration count then grows
+    with each refinement; with the lattice symbol it stays nearly constant
+    (``tests/test_normal.py`` holds it to a bound). The loose stage (residual 1e-5) lets the
+    set settle before the tight one, so few cells change status at the 1e-8 stage, where each
+    change restarts the CG. The set is then updated:
     cells with p < 0 leave, cells with s < 0 join. Returns None if the set does not settle, so the
     caller can fall back to Polonsky-Keer.
     """
@@ -249,23 +255,23 @@ def _active_set_pcg(g: np.ndarray, K, dA: float, force: float | None, delta: flo
         r_max = float(np.abs(r).max())
         target = max(inner_tol * scale, _ETA * r_max if changing else 0.0)
         if r_max > target:
-            # masks as 0/1 weights and sums instead of boolean indexing: at 128² the array
-            # bookkeeping, not the FFTs, was half of the time
+            # masks as 0/1 weights and sums instead of boolean indexing: on small windows the
+            # bookkeeping of boolean indexing costs as much as the FFTs
             w = S.astype(float)
             n_set = float(w.sum())
 
-            def restrict(x: np.ndarray, w=w, n_set=n_set) -> np.ndarray:
+            def on_set(x: np.ndarray, w=w, n_set=n_set) -> np.ndarray:
                 x *= w
                 if force_control:           # project on Σ = 0 over the set
                     x -= (x.sum() / n_set) * w
                 return x
 
-            z = restrict(precondition(r))
+            z = on_set(precondition(r))
             t = z
             rz = float(np.vdot(r, z))
             for _inner in range(max_inner):
                 v = K(t)
-                vS = restrict(v.copy())
+                vS = on_set(v.copy())
                 den = float(np.vdot(t, vS))
                 if not den > 0:
                     break
@@ -276,7 +282,7 @@ def _active_set_pcg(g: np.ndarray, K, dA: float, force: float | None, delta: flo
                 iterations += 1
                 if np.abs(r).max() <= target:
                     break
-                z = restrict(precondition(r))
+                z = on_set(precondition(r))
                 rz_new = float(np.vdot(r, z))
                 t *= rz_new / rz
                 t += z
@@ -307,38 +313,6 @@ def _active_set_pcg(g: np.ndarray, K, dA: float, force: float | None, delta: flo
     return None
 
 
-def _restrict(a: np.ndarray) -> np.ndarray:
-    """Average 2x2 blocks (an odd trailing row/column is repeated)."""
-    ny, nx = a.shape
-    if ny % 2 or nx % 2:
-        a = np.pad(a, ((0, ny % 2), (0, nx % 2)), mode="edge")
-    return 0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
-
-
-def _prolong(p: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    return np.kron(p, np.ones((2, 2)))[: shape[0], : shape[1]]
-
-
-def _box(mask: np.ndarray, margin: int) -> tuple[slice, slice]:
-    rows = np.flatnonzero(mask.any(axis=1))
-    cols = np.flatnonzero(mask.any(axis=0))
-    ny, nx = mask.shape
-    if rows.size == 0:
-        return slice(0, ny), slice(0, nx)
-    j0, j1 = max(rows[0] - margin, 0), min(rows[-1] + 1 + margin, ny)
-    i0, i1 = max(cols[0] - margin, 0), min(cols[-1] + 1 + margin, nx)
-    # round the box up to a multiple of 8 cells so operators are shared between calls
-    j0, j1 = _round(j0, j1, ny)
-    i0, i1 = _round(i0, i1, nx)
-    return slice(j0, j1), slice(i0, i1)
-
-
-def _round(a: int, b: int, n: int) -> tuple[int, int]:
-    size = min(-(-(b - a) // 8) * 8, n)
-    b = min(a + size, n)
-    return b - size, b
-
-
 _COARSEST = 48      # cells across the coarsest level
 _ETA = 0.1          # residual reduction of a CG solve while the contact set still changes
 _BOX_MARGIN = 0.02  # relative margin on the approach estimate when choosing a box
@@ -350,9 +324,9 @@ def _solve_levels(g: np.ndarray, spacing: tuple[float, float], E_star: float,
     dx, dy = spacing
     dA = dx * dy
     if initial is None and min(g.shape) >= 2 * _COARSEST:
-        coarse = _solve_levels(_restrict(g), (2 * dx, 2 * dy), E_star, force,
+        coarse = _solve_levels(restrict(g), (2 * dx, 2 * dy), E_star, force,
                                delta, max(tol, 1e-4), max_iter, None)
-        p0 = _prolong(coarse.p, g.shape)
+        p0 = prolong(coarse.p, g.shape)
         d_est = coarse.delta if delta is None else delta
     elif initial is not None:
         p0 = np.array(initial, dtype=float)
@@ -371,7 +345,7 @@ def _solve_levels(g: np.ndarray, spacing: tuple[float, float], E_star: float,
         if d_est is None:
             box = (slice(0, g.shape[0]), slice(0, g.shape[1]))
         else:
-            box = _box(g < d_est + margin_rel * abs(d_est), margin=2)
+            box = bounding_box(g < d_est + margin_rel * abs(d_est), margin=2)
         gb = g[box]
         K = normal_operator(gb.shape, spacing, E_star)
         if p0 is None:
@@ -387,7 +361,7 @@ def _solve_levels(g: np.ndarray, spacing: tuple[float, float], E_star: float,
         if res is None:
             res = _polonsky_keer(gb, K, dA, force, delta, pb, tol, max_iter)
         full_box = gb.shape == g.shape
-        outside_ok = full_box or bool((g[_outside(box, g.shape)] >= res.delta).all())
+        outside_ok = full_box or bool((g[outside(box, g.shape)] >= res.delta).all())
         if outside_ok:
             p = np.zeros_like(g)
             p[box] = res.p
@@ -398,12 +372,6 @@ def _solve_levels(g: np.ndarray, spacing: tuple[float, float], E_star: float,
         p0 = np.zeros_like(g)
         p0[box] = res.p
     raise ConvergenceError("normal solver: the candidate contact box did not settle")
-
-
-def _outside(box: tuple[slice, slice], shape: tuple[int, int]) -> np.ndarray:
-    mask = np.ones(shape, dtype=bool)
-    mask[box] = False
-    return mask
 
 
 def solve_normal(gap: np.ndarray, grid: Grid, material: Material | ElasticPair, *,
@@ -518,8 +486,10 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material | ElasticPair, 
         contact = p > 0
         d = res.delta
         residual = _kkt(g + u - d, contact, float(u.max()))
-    converged = residual < max(tol, 10 * res.residual) and res.residual < tol
-    if not converged:
+    converged = bool(residual < tol)
+    # the fresh residual may exceed the iteration's own by the drift of its incremental
+    # displacement update: accepted up to 10 times that (itself below tol), not converged
+    if not ((converged or residual < 10 * res.residual) and res.residual < tol):
         raise ConvergenceError(
             f"normal solver did not converge: residual {residual:.3e} > tol {tol:.1e} after "
             f"{res.iterations} iterations (raise max_iter or tol)")
@@ -532,5 +502,5 @@ def solve_normal(gap: np.ndarray, grid: Grid, material: Material | ElasticPair, 
         u = u + coupled
     return NormalContact(pressure=p, displacement=u, contact=contact, gap=np.asarray(gap),
                          grid=grid, pair=pair, approach=d + g0, force=total,
-                         iterations=res.iterations, residual=residual, converged=True,
+                         iterations=res.iterations, residual=residual, converged=converged,
                          traction=traction)

@@ -24,8 +24,8 @@ _DCFFT = ("Liu, S., Wang, Q., Liu, G. (2000). A versatile method of discrete con
           "(DC-FFT) for contact analyses. Wear 243, 101-111.")
 
 # One thread by default: the contact windows are small, and on a 2-core machine two threads
-# made every transform slower (measured, a 2N-padded real 2-D FFT pair: 7.6x at N = 32, 1.4x
-# at 128, 1.06-1.08x at 256-1024); a sweep or a layer runs its cases in parallel processes.
+# made every transform slower, most of all on small windows; a sweep or a layer runs its
+# cases in parallel processes.
 #: cells added to a window for its periodic preconditioner (a margin against wrap-around)
 _PRECONDITION_PAD = 8
 _workers: int = int(os.environ.get("THIRDBODY_WORKERS", "0")) or 1
@@ -208,8 +208,8 @@ class NormalOperator:
         """Approximate inverse of this operator, pressure (Pa) from a displacement field (m):
         the field is convolved, periodically on the window plus ``_PRECONDITION_PAD`` cells,
         with the inverse of :func:`boussinesq_symbol`. The inverse kernel falls off as 1/r³, so
-        the wrap-around costs nothing measurable (the same CG iteration counts as on a 2x padded
-        grid, window-filling ellipses at 128² to 1024²), and the transforms are 4x smaller."""
+        the wrap-around leaves the CG's convergence as on a grid padded to twice the window,
+        with transforms 4x smaller."""
         size, inv = self._preconditioner
         return _periodic_apply(residual, size, lambda spec: spec.__imul__(inv))
 

@@ -12,26 +12,16 @@ history (the paper's eq 7, with the friction disc |τ| <= μp rather than a box 
 
 Equivalently τ minimises ½ (τ-τ⁰)ᵀ K (τ-τ⁰) - Δs·Σ(τ-τ⁰)ΔA over the discs; with a prescribed
 force Q the constraint Σ τ ΔA = Q replaces Δs, which becomes its multiplier. τ⁰ is the previous
-traction as it was, not projected on the new discs first (docs/methods/design.md §4 says why): where
-the pressure fell, the projection would release a displacement K (τ⁰ − Π τ⁰) that no cell counts as
-slip, so the stick cells would not follow the plate (measured: off by 78-93 % of the step's
-displacement when the normal load drops to 0.8 or 0.3 of its value).
+traction as it was, not projected on the new discs first (docs/methods/design.md §4 says why):
+where the pressure fell, the projection would release a displacement K (τ⁰ − Π τ⁰) that no cell
+counts as slip, so the stick cells would not follow the plate.
 
-Solver: an active-set method in the spirit of Kalker's CONTACT (Vollebregt 2014): with the slip
-cells and their slip directions fixed, the stick tractions solve a linear symmetric positive
-definite problem, handled by conjugate gradients preconditioned with the inverse of the
-half-space's 2x2 lattice symbol (:func:`~thirdbody.bem.operator.cerruti_symbol`); an outer loop
-moves cells between stick and slip and updates slip directions.
-Slip cells keep one degree of freedom in the CG, a rotation on their disc, with the Newton
-curvature |w|/(μp); three measures keep the iteration counts low at ν > 0:
-
-* the rotation dofs are scaled by (k₀/(k₀ + |w|/(μp)))^½ around the Fourier preconditioner;
-* the preconditioner is the free half-space's symbol, not the inverse of the zero-padded
-  kernel's spectrum (cut off at the window, wrong at the contact's own wavelengths): on the
-  Cattaneo benchmark at 512² it takes 33 CG iterations at ν = 0.5 and 30 at ν = 0.3, where the
-  inverse of a kernel padded by half the box took 164 and 263;
-* a coarse-to-fine cascade gives the finest grid its starting stick/slip sets and directions,
-  and while the sets still change each CG solve only reduces its residual tenfold.
+This module holds the step's result (:class:`TangentialContact`) and :func:`solve_tangential`,
+which validates its inputs and dispatches to one function per case: full sliding, frictionless,
+force control and shift control. The solvers live next door: the active set (Kalker's CONTACT
+as Vollebregt 2014 solves it) in :mod:`~thirdbody.bem.active_set`, the shift search that backs
+force control near full sliding in :mod:`~thirdbody.bem.shift_search`, Coulomb's discs and
+residual in :mod:`~thirdbody.bem.coulomb`.
 
 Sign conventions: traction is what the plate exerts on the particle (Pa); displacements are the
 particle surface's (m), parallel to the traction that causes them; the shift is the plate's.
@@ -39,24 +29,22 @@ particle surface's (m), parallel to the traction that causes them; the shift is 
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
-from scipy.fft import next_fast_len
+from numpy.typing import ArrayLike
 
-from .._citations import cites
-from .normal import ConvergenceError, NormalContact, _prolong, _restrict
-from .operator import coupling_operator, tangential_operator
+from .active_set import ActiveSet, WindowStep, solve_on_levels
+from .coulomb import coulomb_residual
+from .grid import fast_span
+from .normal import ConvergenceError, NormalContact
+from .operator import TangentialOperator, coupling_operator, tangential_operator
+from .shift_search import force_by_shift
 
-_KALKER = ("Kalker, J. J. (1990). Three-Dimensional Elastic Bodies in Rolling Contact. Kluwer; "
-           "Vollebregt, E. A. H. (2014). J. Comput. Phys. 257, 333-351 (CG with FFT "
-           "preconditioner).")
-
-
-_DEBUG = False
-_COARSEST = 16    # cells across the contact box on the coarsest level
-_SOFT = 1.0
-_ETA = 0.1
+__all__ = ["FrictionLimitError", "TangentialContact", "coulomb_residual", "restart_traction",
+           "solve_tangential", "solve_tangential_from"]
 
 
 class FrictionLimitError(ValueError):
@@ -91,6 +79,12 @@ class TangentialContact:
         the projection on the friction disc and k₀ the self-compliance: zero iff every cell
         obeys stick or slip exactly.
     converged : bool
+        Whether ``residual`` is within the requested ``tol``. An iterative step is accepted up
+        to 10 ``tol`` (the active set stops when its inner tolerance has fallen a thousandfold
+        below ``tol`` without meeting it) and then reported with ``converged`` False; beyond
+        that the solver raises :class:`~thirdbody.bem.ConvergenceError`. The closed forms (full
+        sliding, frictionless) iterate nothing and report True: their residual is what the
+        closed form leaves (in full sliding the slip need not be parallel to μp e everywhere).
     full_sliding : bool
         Every contact cell slides (|τ| = μp everywhere).
     twist : float
@@ -138,19 +132,6 @@ class TangentialContact:
                      * self.normal.grid.cell_area)
 
 
-def coulomb_residual(traction: np.ndarray, slip_increment: np.ndarray, pressure: np.ndarray,
-                     mu: float, self_compliance: float) -> float:
-    """Natural residual of Coulomb's law (see :class:`TangentialContact`), dimensionless."""
-    trial = traction + slip_increment / self_compliance
-    norm = np.sqrt((trial * trial).sum(axis=0))
-    limit = mu * pressure
-    with np.errstate(divide="ignore", invalid="ignore"):
-        factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
-    diff = traction - trial * factor
-    scale = mu * float(pressure.max())
-    return float(np.sqrt((diff * diff).sum(axis=0)).max() / scale) if scale > 0 else 0.0
-
-
 def restart_traction(traction: np.ndarray, slipping: np.ndarray, normal: NormalContact,
                      mu: float) -> np.ndarray:
     """A start for a tangential solve close to a solved one (the same load under a slightly
@@ -164,252 +145,15 @@ def restart_traction(traction: np.ndarray, slipping: np.ndarray, normal: NormalC
                     np.where(normal.contact, traction, 0.0))
 
 
-def _project_on_discs(tau: np.ndarray, limit: np.ndarray) -> np.ndarray:
-    norm = np.sqrt((tau * tau).sum(axis=0))     # (1, ny, nx) in the scalar problem: |τ_x|
-    with np.errstate(divide="ignore", invalid="ignore"):
-        factor = np.where(norm > limit, limit / np.where(norm > 0, norm, 1.0), 1.0)
-    return tau * factor
-
-
-@cites("kalker_tangcg", _KALKER)
-def _active_set(K, tau0: np.ndarray, limit: np.ndarray, contact: np.ndarray, dA: float,
-                force: np.ndarray | None, shift: np.ndarray | None, tol: float,
-                scalar: bool, max_outer: int, max_inner: int,
-                initial: np.ndarray | None = None, rigid: np.ndarray | None = None):
-    """Solve one step on a window. Returns (tau, du, ds, stick, iterations) or None.
-
-    ``initial`` is a starting traction (e.g. from a coarser grid): its cells on the friction limit
-    start in the slip set with its directions. ``rigid`` (2, ny, nx) is a prescribed rigid
-    displacement increment of the plate on top of the uniform shift ``ds`` (a twist), m.
-    """
-    force_control = force is not None
-    ncomp = 1 if scalar else 2
-    T = K._t
-
-    def apply(t: np.ndarray) -> np.ndarray:
-        if scalar:
-            spec = T.forward(t[0])
-            spec *= K.spectra[0]
-            return T.inverse(spec)[None]
-        return K(t)
-
-    def precondition(r: np.ndarray) -> np.ndarray:
-        return K.precondition(r, scalar=scalar)
-
-    tau0 = tau0[:ncomp]
-    rigid = np.zeros_like(tau0) if rigid is None else rigid[:ncomp]
-    k0 = K.self_terms[0]
-    # cells with zero friction limit (p = 0 at the contact edge) carry no traction
-    zero_limit = contact & (limit <= 0)
-    if initial is None:
-        # start from the previous traction on the new friction discs (it stays the reference of
-        # the displacement increment: the surface moved by K (τ − τ⁰) in this step, eq. 7)
-        tau = _project_on_discs(np.where(contact, tau0, 0.0), limit)
-        slip = np.zeros_like(contact)
-        direction = np.zeros_like(tau0)
-    else:
-        tau = _project_on_discs(np.where(contact, initial[:ncomp], 0.0), limit)
-        norm0 = np.sqrt((tau * tau).sum(axis=0))
-        slip = contact & ~zero_limit & (norm0 >= limit * (1 - 1e-6))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            direction = np.where(slip, tau / np.where(norm0 > 0, norm0, 1.0), 0.0)
-    stick = contact & ~slip & ~zero_limit
-    loose = max(tol, 1e-4)
-    inner_tol = loose
-    changing = True
-    iterations = 0
-    ds = np.zeros(ncomp) if force_control else np.asarray(shift, dtype=float)[:ncomp]
-    eye = np.eye(ncomp)
-    # curvature of |τ| = μp (the slip multiplier |w|/(μp)): the Newton term on rotations
-    curvature = np.zeros(contact.shape)
-
-    # slip sets visited since the last CG step; a return to one of them is a cycle
-    seen: set[bytes] = set()
-    for _outer in range(max_outer):
-        iterations_before = iterations
-        # the admissible variations V: stick cells move freely, slip cells only rotate on their
-        # disc (tangent direction e_perp, scaled by the limit), other cells not at all
-        if scalar:
-            perp = np.zeros_like(direction)
-        else:
-            # rotations stiffer than the cell's own elastic stiffness are left to the projection
-            # update below (their slip direction is well defined); soft ones go into the CG
-            soft = slip & (curvature * k0 <= _SOFT)
-            perp = np.stack([-direction[1], direction[0]]) * soft
-        gram = stick.sum() * eye
-        if not scalar:
-            gram = gram + np.einsum("iyx,jyx->ij", perp, perp)
-
-        def project(x: np.ndarray, constrain: bool = force_control, stick=stick, perp=perp,
-                    gram=gram) -> np.ndarray:
-            y = np.where(stick, x, 0.0)
-            if not scalar:
-                y += (x * perp).sum(axis=0) * perp
-            if constrain:
-                lam = np.linalg.lstsq(gram, y.reshape(ncomp, -1).sum(axis=1), rcond=None)[0]
-                y -= np.where(stick, lam[:, None, None], 0.0)
-                if not scalar:
-                    y -= (lam[:, None, None] * perp).sum(axis=0) * perp
-            return y
-
-        tau = np.where(slip, limit * direction, tau)
-        tau[:, ~contact] = 0.0
-        if force_control:
-            if not stick.any():
-                return None
-            mismatch = force[:ncomp] / dA - tau.reshape(ncomp, -1).sum(axis=1)
-            tau[:, stick] += (mismatch / stick.sum())[:, None]
-        du = apply(tau - tau0)
-        # the CG stops on the displacement residual in the Coulomb residual's own units
-        # (k₀ μ max p): a stick cell's error w/k₀ is then below tol·μ max p
-        scale = max(k0 * float(limit.max()), 1e-300)
-
-        def shift_estimate(du: np.ndarray, gram=gram, project=project) -> np.ndarray:
-            # the multiplier of the force constraint: Σ P_i (ds + rigid_i - du_i) = 0
-            return np.linalg.lstsq(gram, project(du - rigid, False).reshape(ncomp, -1)
-                                   .sum(axis=1), rcond=None)[0]
-
-        if force_control:
-            ds = shift_estimate(du)
-        # symmetric diagonal scaling of the rotation dofs by (k₀ / (k₀ + c))^½: the Fourier
-        # preconditioner approximates K⁻¹ but the rotations see K + c
-        S = np.sqrt(k0 / (k0 + curvature)) if not scalar else 1.0
-        r = project(ds[:, None, None] + rigid - du)
-        # while the sets still change, an inexact solve (a fixed reduction of the residual) is
-        # enough to tell which cells move next
-        r_norm = float(np.abs(r).max())
-        target = max(inner_tol * scale, _ETA * r_norm if changing else 0.0)
-        if r_norm > target:
-            z = project(S * precondition(S * r))
-            t = z
-            rz = float(np.vdot(r, z))
-            for _inner in range(max_inner):
-                v = apply(t)
-                vs = project(v + curvature * t)
-                den = float(np.vdot(t, vs))
-                if not den > 0:
-                    break
-                alpha = rz / den
-                tau += alpha * t
-                du += alpha * v
-                r -= alpha * vs
-                iterations += 1
-                if np.abs(r).max() <= target:
-                    break
-                z = project(S * precondition(S * r))
-                rz_new = float(np.vdot(r, z))
-                t = z + (rz_new / rz) * t
-                rz = rz_new
-            else:
-                return None
-            if force_control:
-                ds = shift_estimate(du)
-        w = ds[:, None, None] + rigid - du               # relative slip of the plate
-        norm_tau = np.sqrt((tau * tau).sum(axis=0))
-        to_slip = stick & (norm_tau > limit)
-        along = (w * direction).sum(axis=0)
-        # a slip cell sticks again when its trial traction τ + w/k₀ falls inside its disc (the
-        # semismooth-Newton active set; `along < 0` alone reacts to every sign flip of a small w)
-        trial_in = ((tau + w / k0) ** 2).sum(axis=0) < limit**2
-        to_stick = slip & (along < 0) & trial_in
-        keep = slip & ~to_stick
-        # slip tractions rotated in the tangent plane go back on the circle; stiff ones follow
-        # the projection of the trial traction τ + w/k₀
-        if not scalar:
-            trial = np.where(soft, tau, tau + w / k0)
-        else:
-            trial = tau
-        norm_trial = np.sqrt((trial * trial).sum(axis=0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            unit = np.where(slip, trial / np.where(norm_trial > 0, norm_trial, 1.0),
-                            tau / np.where(norm_tau > 0, norm_tau, 1.0))
-        turned = float((limit * np.abs(unit - direction))[:, keep].max(initial=0.0))
-        turned /= max(float(limit.max()), 1e-300)
-        if _DEBUG:
-            print("outer", _outer, "stick", int(stick.sum()), "slip", int(slip.sum()),
-                  "to_slip", int(to_slip.sum()), "to_stick", int(to_stick.sum()),
-                  "turned", turned, "its", iterations)
-        changing = bool(to_slip.any() or to_stick.any())
-        # a cell on the stick/slip boundary can flip back and forth with no CG step in between
-        # (the residual is already below the target; seen in Spence's problem at 48² and 96²):
-        # when the sets return to one visited since the last CG step, test Coulomb's law as it
-        # stands
-        if iterations != iterations_before:
-            seen = set()
-        seen.add(slip.tobytes())
-        cycling = changing and ((slip & ~to_stick) | to_slip).tobytes() in seen
-        if (not changing or cycling) and turned <= inner_tol:
-            if inner_tol <= tol:
-                tau_f = np.where(slip, limit * unit, tau)
-                du_f = apply(tau_f - tau0)
-                if force_control:
-                    ds = shift_estimate(du_f)
-                w_f = np.where(contact & ~zero_limit, ds[:, None, None] + rigid - du_f, 0.0)
-                res = coulomb_residual(np.where(contact, tau_f, 0.0), w_f, limit, 1.0, k0)
-                if res <= tol or inner_tol < tol * 1e-3:
-                    return tau_f, du_f, ds, stick, iterations
-                inner_tol /= 10     # the stopping test was met but not Coulomb's law: tighten
-            else:
-                inner_tol = tol
-        direction = np.where(to_slip | keep, unit, direction)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            curvature = np.where(keep, np.sqrt((w * w).sum(axis=0)) / limit, 0.0)
-        slip = (slip & ~to_stick) | to_slip
-        stick = contact & ~slip & ~zero_limit
-    return None
-
-def _fast_span(a: int, b: int, n: int) -> slice:
-    """Widen [a, b) inside [0, n) to a length whose FFTs are fast (5-smooth), if it fits."""
-    size = next_fast_len(b - a, real=True)
-    if size > n:
-        return slice(a, b)
-    lo = max(0, min(a - (size - (b - a)) // 2, n - size))
-    return slice(lo, lo + size)
-
-
-def _solve_levels(spacing: tuple[float, float], G: float, nu: float, tau0: np.ndarray,
-                  limit: np.ndarray, contact: np.ndarray, force: np.ndarray | None,
-                  shift: np.ndarray | None, tol: float, scalar: bool, max_outer: int,
-                  max_inner: int, initial: np.ndarray | None = None,
-                  rigid: np.ndarray | None = None):
-    """Coarse-to-fine cascade: the step is first solved (loosely) on a grid twice as coarse, whose
-    traction gives this level its starting stick/slip sets and slip directions. Most of the
-    active-set updates then happen where they are cheap."""
-    dx, dy = spacing
-    shape = contact.shape
-    if initial is None and min(shape) >= 2 * _COARSEST:
-        c_limit = _restrict(limit)
-        c_contact = (_restrict(contact.astype(float)) > 0) & (c_limit > 0)
-        c_tau0 = np.stack([_restrict(t) for t in tau0])
-        c_rigid = None if rigid is None else np.stack([_restrict(r) for r in rigid])
-        coarse = _solve_levels((2 * dx, 2 * dy), G, nu, c_tau0, c_limit, c_contact, force,
-                               shift, max(tol, 1e-4), scalar, max_outer, max_inner,
-                               rigid=c_rigid)
-        if coarse is not None:
-            # fine cells under a coarse slip cell start slipping in its direction, on their own
-            # (finer) friction limit; the others take the coarse traction
-            c_tau = coarse[0]
-            c_norm = np.sqrt((c_tau * c_tau).sum(axis=0))
-            c_slip = c_contact & (c_norm >= c_limit * (1 - 1e-6))
-            with np.errstate(divide="ignore", invalid="ignore"):
-                c_dir = np.where(c_slip, c_tau / np.where(c_norm > 0, c_norm, 1.0), 0.0)
-            slip = _prolong(c_slip.astype(float), shape) > 0.5
-            initial = np.zeros((2, *shape))
-            for k in range(c_tau.shape[0]):
-                initial[k] = np.where(slip, limit * _prolong(c_dir[k], shape),
-                                      _prolong(c_tau[k], shape))
-    K = tangential_operator(shape, spacing, G, nu)
-    return _active_set(K, tau0, limit, contact, dx * dy, force, shift, tol, scalar, max_outer,
-                       max_inner, initial, rigid)
-
-
-def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None,
+def solve_tangential(normal: NormalContact, mu: float, *,
+                     force: ArrayLike | float | None = None,
+                     shift: ArrayLike | float | None = None,
                      previous: TangentialContact | None = None, tol: float = 1e-8,
-                     scalar: bool = False, max_outer: int = 60,
-                     max_iter: int = 500, twist: float | None = None,
+                     scalar: bool = False, max_outer: int = 60, max_iter: int = 500,
+                     twist: float | None = None,
                      twist_centre: tuple[float, float] = (0.0, 0.0),
                      coupling: bool = False, previous_pressure: np.ndarray | None = None,
-                     _initial: np.ndarray | None = None,
+                     callback: Callable[[ActiveSet], None] | None = None,
                      ) -> TangentialContact:
     """Solve one incremental partial-slip step on top of a normal contact solution.
 
@@ -453,6 +197,12 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         With ``coupling``: the previous step's pressure on this grid, Pa (default:
         ``previous.normal.pressure``, or zero without ``previous``: the normal load was applied
         in this step).
+    callback : callable, optional
+        Called as ``callback(solver)`` after each outer pass of every active-set solve (on
+        each level of the coarse-to-fine cascade, and in each solve of the shift search), with
+        the :class:`~thirdbody.bem.active_set.ActiveSet`; its ``last_pass``
+        (:class:`~thirdbody.bem.active_set.OuterPass`) says what the pass did. For tracing:
+        ``callback=lambda s: print(s.last_pass)``.
 
     Raises
     ------
@@ -465,28 +215,114 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
 
     Notes
     -----
+    The cases, each in its own function: full sliding (|force| = μF_N, a closed form),
+    frictionless (μ = 0 and no force), force control (the active set with the force
+    constraint; near full sliding, where it can fail, the shift search of
+    :mod:`~thirdbody.bem.shift_search`) and shift control (the active set).
+
     Without coupling (Goodman's approximation) the tangential tractions do not change the
     pressure and the pressure does not move the surface tangentially: exact for ν = 0.5
     against a rigid plate. :func:`thirdbody.bem.solve_coupled` alternates the two problems.
     """
+    step, force, shift = _validated(
+        normal, mu, force=force, shift=shift, previous=previous, tol=tol, scalar=scalar,
+        max_outer=max_outer, max_iter=max_iter, twist=twist, twist_centre=twist_centre,
+        coupling=coupling, previous_pressure=previous_pressure, callback=callback)
+    return _dispatch(step, force, shift, start=None)
+
+
+#: the keyword arguments of :func:`solve_tangential` and their defaults
+_OPTIONS = dict(solve_tangential.__kwdefaults__)
+
+
+def solve_tangential_from(start: np.ndarray | None, normal: NormalContact, mu: float,
+                          **options: Any) -> TangentialContact:
+    """:func:`solve_tangential` (``options``: its keyword arguments) with the iteration
+    started from the traction ``start`` (2, ny, nx), Pa, instead of the coarse-to-fine
+    cascade: its cells on the friction limit start slipping in its direction. For solvers that
+    repeat a step under a slightly different pressure (the coupled passes of
+    :func:`~thirdbody.bem.solve_coupled`, a particle's coupled evaluations), with ``start``
+    from :func:`restart_traction`. None: as :func:`solve_tangential`. The start changes the
+    iteration, not what is accepted: the same checks apply."""
+    step, force, shift = _validated(normal, mu, **{**_OPTIONS, **options})
+    return _dispatch(step, force, shift, start)
+
+
+def _dispatch(step: _Step, force: np.ndarray | None, shift: np.ndarray | None,
+              start: np.ndarray | None) -> TangentialContact:
+    """The case the load makes of the step, solved: ``force`` (2,), N, or the total ``shift``
+    (2,), m."""
+    if force is None:
+        return _shift_control(step, shift, start)
+    q = float(np.hypot(*force))
+    if q >= step.cap * (1 - 1e-12) and q > 0:
+        return _full_sliding(step, force / q)
+    if step.cap == 0:
+        return _frictionless(step)
+    return _force_control(step, force, start)
+
+
+@dataclass(frozen=True)
+class _Step:
+    """One step as :func:`_validated` made it, without its load: what every case needs (and
+    each solve of the shift search, which differ only in the shift)."""
+
+    normal: NormalContact
+    mu: float
+    #: the previous traction as it was (the reference of the displacement increment), Pa
+    tau0: np.ndarray
+    #: the previous step's shift, m
+    prev_shift: np.ndarray
+    twist: float
+    twist_centre: tuple[float, float]
+    #: rigid displacement increment of the plate on top of the uniform shift (twist; with
+    #: coupling also the pressure increment's tangential displacement, opposite), m, or None
+    rigid: np.ndarray | None
+    #: tangential displacement of the whole pressure (coupling), m, or None
+    coupled: np.ndarray | None
+    K: TangentialOperator
+    tol: float
+    scalar: bool
+    max_outer: int
+    max_iter: int
+    callback: Callable[[ActiveSet], None] | None
+
+    @property
+    def k0(self) -> float:
+        """Self-compliance K_xx(0), m/Pa."""
+        return self.K.self_terms[0]
+
+    @property
+    def cap(self) -> float:
+        """The friction limit μF_N, N."""
+        return self.mu * self.normal.force
+
+    def force_of(self, traction: np.ndarray) -> np.ndarray:
+        """Total force Σ τ ΔA (2,), N, of a (2, ny, nx) traction in Pa."""
+        return traction.reshape(2, -1).sum(axis=1) * self.normal.grid.cell_area
+
+
+def _vector(value, name: str) -> np.ndarray:
+    """A finite scalar (x component) or 2-vector as a (2,) float array."""
+    a = np.zeros(2)
+    v = np.atleast_1d(np.asarray(value, dtype=float))
+    if v.size not in (1, 2) or not np.isfinite(v).all():
+        raise ValueError(f"{name} must be a finite scalar or 2-vector, got {v!r}")
+    a[: v.size] = v
+    return a
+
+
+def _validated(normal: NormalContact, mu: float, *, force, shift, previous, tol, scalar,
+               max_outer, max_iter, twist, twist_centre, coupling, previous_pressure,
+               callback) -> tuple[_Step, np.ndarray | None, np.ndarray | None]:
+    """Check the inputs of :func:`solve_tangential` and gather the step: (step, force (2,) in N
+    or None, total shift (2,) in m or None)."""
     if not (np.isfinite(mu) and mu >= 0):
         raise ValueError(f"mu (friction coefficient) must be a finite number >= 0, got {mu!r}")
     if (force is None) == (shift is None):
         raise ValueError("give exactly one of force (N) and shift (m)")
     grid, mat = normal.grid, normal.pair
-
-    def vec(v, name):
-        a = np.zeros(2)
-        v = np.atleast_1d(np.asarray(v, dtype=float))
-        if v.size not in (1, 2) or not np.isfinite(v).all():
-            raise ValueError(f"{name} must be a finite scalar or 2-vector, got {v!r}")
-        a[: v.size] = v
-        return a
-
     p = normal.pressure
-    contact = normal.contact
-    limit = mu * p
-    FN = normal.force
     prev_shift = np.zeros(2)
     prev_twist = 0.0
     tau0 = np.zeros((2, *grid.shape))
@@ -510,7 +346,7 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
             raise ValueError("scalar=True solves x-loading only: no twist")
         X, Y = grid.mesh()
         rigid = (twist - prev_twist) * np.stack([-(Y - centre[1]), X - centre[0]])
-    coupled = None          # tangential displacement of the whole pressure (with coupling)
+    coupled = None
     if coupling and mat.coupled:
         if scalar:
             raise ValueError("scalar=True ignores u_y: no normal-tangential coupling")
@@ -527,366 +363,126 @@ def solve_tangential(normal: NormalContact, mu: float, *, force=None, shift=None
         pressure_slip = -C.tangential(p - previous_pressure)
         rigid = pressure_slip if rigid is None else rigid + pressure_slip
     K = tangential_operator(grid.shape, grid.spacing, mat.G, mat.nu)
-    k0 = K.self_terms[0]
-    spin = {"twist": twist, "twist_centre": centre}
-    couple = {"coupling": coupling, "previous_pressure": previous_pressure}
-
+    step = _Step(normal, mu, tau0, prev_shift, twist, centre, rigid, coupled, K, tol, scalar,
+                 max_outer, max_iter, callback)
     if force is not None:
-        Q = vec(force, "force")
+        Q = _vector(force, "force")
         if scalar and Q[1] != 0:
             raise ValueError("scalar=True solves x-loading only: force must have F_y = 0")
         Qn = float(np.hypot(*Q))
-        cap = mu * FN
+        cap = step.cap
         if Qn > cap * (1 + 1e-12):
             raise FrictionLimitError(
                 f"tangential force {Qn:.6g} N exceeds the friction limit mu*F_N = {cap:.6g} N "
-                f"(mu = {mu}, F_N = {FN:.6g} N): the contact slides")
-        if Qn >= cap * (1 - 1e-12) and Qn > 0:
-            return replace(_full_sliding(normal, mu, Q / Qn, tau0, prev_shift, K, rigid,
-                                         coupled), **spin)
-        if cap == 0:
-            # frictionless (μ = 0) and no force: no traction anywhere, every cell free to slip;
-            # the plate's shift is undefined, so it does not move
-            return _finish(normal, mu, np.zeros_like(tau0), tau0, np.zeros(2), prev_shift, K,
-                           k0, 0, tol, full=True, spin=spin, coupled=coupled)
-        ds_prescribed = None
-    else:
-        ds_prescribed = vec(shift, "shift") - prev_shift
-        if scalar and ds_prescribed[1] != 0:
-            raise ValueError("scalar=True solves x-loading only: shift must have s_y = 0")
-        Q = None
+                f"(mu = {mu}, F_N = {normal.force:.6g} N): the contact slides")
+        return step, Q, None
+    total = _vector(shift, "shift")
+    if scalar and (total - prev_shift)[1] != 0:
+        raise ValueError("scalar=True solves x-loading only: shift must have s_y = 0")
+    return step, None, total
 
-    # work on the bounding box of the contact: tractions vanish outside it
+
+# --- the cases -------------------------------------------------------------------------------
+def _full_sliding(step: _Step, e: np.ndarray) -> TangentialContact:
+    """|force| = μF_N along the unit vector ``e``: τ = μp e everywhere in contact. The shift is
+    the smallest one consistent with every cell slipping along e: the plate has moved at least
+    as far as the furthest surface point."""
+    normal, rigid = step.normal, step.rigid
+    tau = step.mu * normal.pressure * e[:, None, None]
+    tau[:, ~normal.contact] = 0.0
+    du = step.K(tau - step.tau0)
+    if rigid is not None:
+        du = du - rigid
+    along = (du * e[:, None, None]).sum(axis=0)[normal.contact].max()
+    return _finish(step, tau, e * along, 0, 1.0, full=True, rigid=rigid)
+
+
+def _frictionless(step: _Step) -> TangentialContact:
+    """μ = 0 and no force: no traction anywhere, every cell free to slip; the plate's shift is
+    undefined, so it does not move."""
+    return _finish(step, np.zeros_like(step.tau0), np.zeros(2), 0, step.tol, full=True)
+
+
+def _force_control(step: _Step, force: np.ndarray,
+                   start: np.ndarray | None = None) -> TangentialContact:
+    """0 < |force| < μF_N: the active set with the force constraint, its answer's force checked
+    from the tractions like Coulomb's law (the active set holds it to round-off); if either
+    fails (typically close to full sliding, where the stick zone is a few cells or none), the
+    shift search."""
+    t, failure = _by_active_set(step, force=force, start=start)
+    if t is not None:
+        if np.abs(t.force - force).max() <= max(step.tol, 1e-12) * step.cap:
+            return t
+        failure = (f"tangential solver: force ({t.force[0]:.6g}, {t.force[1]:.6g}) N "
+                   f"misses the prescribed ({force[0]:.6g}, {force[1]:.6g}) N")
+    return force_by_shift(step, force, failure, _shift_control)
+
+
+def _shift_control(step: _Step, shift: np.ndarray,
+                   start: np.ndarray | None = None) -> TangentialContact:
+    """The plate's total shift prescribed (2,), m: the active set."""
+    t, failure = _by_active_set(step, shift=shift - step.prev_shift, start=start)
+    if t is None:
+        raise ConvergenceError(failure)
+    return t
+
+
+def _by_active_set(step: _Step, *, force: np.ndarray | None = None,
+                   shift: np.ndarray | None = None,
+                   start: np.ndarray | None = None) -> tuple[TangentialContact | None, str]:
+    """The step by the active set (:func:`~thirdbody.bem.active_set.solve_on_levels`) on the
+    bounding box of the contact (tractions vanish outside it), with the prescribed ``force``
+    (N) or ``shift`` increment (m), checked by :func:`_finish`: (step, "") or (None, why)."""
+    normal, grid, K = step.normal, step.normal.grid, step.K
+    contact = normal.contact
     rows = np.flatnonzero(contact.any(axis=1))
     cols = np.flatnonzero(contact.any(axis=0))
     if rows.size == 0:
         raise ValueError("the normal solution has no contact")
-    box = (_fast_span(rows[0], rows[-1] + 1, grid.ny), _fast_span(cols[0], cols[-1] + 1, grid.nx))
+    box = (fast_span(rows[0], rows[-1] + 1, grid.ny), fast_span(cols[0], cols[-1] + 1, grid.nx))
     cells = (slice(None), *box)
-    rigid_box = None if rigid is None else rigid[cells]
-    outside = tau0.copy()
+    rigid_box = None if step.rigid is None else step.rigid[cells]
+    outside = step.tau0.copy()
     outside[cells] = 0.0
     if outside.any():
         # the previous traction outside the box (where the contact was lost) drops to zero: the
         # displacement that releases on the box counts like a motion of the plate
         released = K(outside)[cells]
         rigid_box = released if rigid_box is None else rigid_box + released
-    out = _solve_levels(grid.spacing, mat.G, mat.nu, tau0[cells], limit[box],
-                        contact[box], Q, ds_prescribed, tol, scalar, max_outer, max_iter,
-                        None if _initial is None else _initial[cells], rigid_box)
-    failure = ("tangential solver did not converge (stick/slip set or slip directions kept "
-               "changing); try a smaller load increment")
-    if out is not None:
-        tau_b, _, ds, _, iterations = out
-        ncomp = tau_b.shape[0]
-        tau = np.zeros((2, *grid.shape))
-        tau[(slice(ncomp), *box)] = tau_b
-        dsv = np.zeros(2)
-        dsv[:ncomp] = ds
-        if ds_prescribed is not None:
-            dsv = ds_prescribed
-        try:
-            t = _finish(normal, mu, tau, tau0, dsv, prev_shift, K, k0, iterations, tol,
-                        rigid=rigid, spin=spin, coupled=coupled, scalar=scalar)
-        except ConvergenceError as exc:
-            failure = str(exc)
-        else:
-            # the force too is checked from the tractions, as Coulomb's law is (the active set
-            # holds it to round-off); a miss goes on to the shift search below
-            if Q is None or np.abs(t.force - Q).max() <= max(tol, 1e-12) * cap:
-                return t
-            failure = (f"tangential solver: force ({t.force[0]:.6g}, {t.force[1]:.6g}) N "
-                       f"misses the prescribed ({Q[0]:.6g}, {Q[1]:.6g}) N")
-    if Q is None:
-        raise ConvergenceError(failure)
-    # force control failed: typically close to full sliding, where the stick zone is a few
-    # cells or none (with ν > 0 the slip directions fan out, so every cell can slip while
-    # |Q| < μF_N); find the shift that transmits Q with displacement-controlled solves
-    return _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer,
-                           max_iter, failure, spin, couple)
-
-
-def _force_by_shift(normal, mu, Q, previous, prev_shift, tol, scalar, max_outer, max_iter,
-                    failure, spin, couple):
-    """Force control by root finding on the shift increment: along e = Q/|Q| the transmitted
-    force F(s e)·e increases monotonically with s (F is the gradient of a convex function of
-    the shift), so it is bracketed (ahead of the previous shift, or behind it when the force
-    falls: :func:`_bracket_behind`) and solved by Brent's method (:func:`_root`). When the
-    contact is not symmetric that force is at an angle to Q: the shift's length and angle are
-    then corrected together by Broyden's method (:func:`_broyden`), or, should that fail, one
-    at a time (a secant step across e, then a new root along e)."""
-    q = float(np.hypot(*Q))
-    e = Q / q
-    e_perp = np.array([-e[1], e[0]])
-    iterations = 0
-    warm: list[np.ndarray | None] = [None]
-    points: list[tuple[float, float, TangentialContact]] = []     # every solve: (s, s_perp, step)
-
-    def solve(s: float, s_perp: float) -> TangentialContact:
-        nonlocal iterations
-        shift = prev_shift + s * e + s_perp * e_perp
-        try:
-            t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
-                                 scalar=scalar, max_outer=max_outer, max_iter=max_iter,
-                                 _initial=warm[0], **spin, **couple)
-        except ConvergenceError:
-            if warm[0] is None:
-                raise
-            t = solve_tangential(normal, mu, shift=shift, previous=previous, tol=tol,
-                                 scalar=scalar, max_outer=max_outer, max_iter=max_iter,
-                                 **spin, **couple)
-        warm[0] = t.traction
-        iterations += t.iterations
-        points.append((s, s_perp, t))
-        return t
-
-    def along(t: TangentialContact) -> float:
-        return float(t.force @ e) - q
-
-    def mismatch(t: TangentialContact) -> np.ndarray:
-        # the force's magnitude as (μF_N − q)^½ / (μF_N − |F|)^½ − 1 and its angle to e: both
-        # zero at the root and nearly linear in the shift near full sliding, the first in the
-        # shift's length (see _root), the second in its angle; F·e would mix the two (the
-        # angle lowers it to second order, as much as the last 1e-4 of the length does)
-        f = float(np.hypot(*t.force))
-        h = _straightened(f, q, cap) if cap > q else f - q
-        return np.array([h, float(np.arctan2(t.force @ e_perp, t.force @ e))])
-
-    # scale: the shift of full sliding along e (all cells slip once the plate has moved past
-    # the furthest surface point)
-    K = tangential_operator(normal.grid.shape, normal.grid.spacing, normal.pair.G,
-                            normal.pair.nu)
-    tau_full = mu * normal.pressure * e[:, None, None]
-    tau_full[:, ~normal.contact] = 0.0
-    tau0 = np.zeros_like(tau_full)
-    if previous is not None:
-        tau0 = _project_on_discs(np.where(normal.contact, previous.traction, 0.0),
-                                 mu * normal.pressure)
-    du = K(tau_full - tau0)
-    s_hi = max(float((du * e[:, None, None]).sum(axis=0)[normal.contact].max()), 1e-300)
-    s_perp = 0.0
-    lo = 0.0
-    hi, t_hi = s_hi, solve(s_hi, s_perp)
-    f_hi = along(t_hi)
-    cap = mu * normal.force
-    for jump in range(60):
-        if f_hi >= 0:
-            break
-        lo, f_lo = hi, f_hi
-        hi *= _bracket_factor(f_hi, q, cap, jump)
-        t_hi = solve(hi, s_perp)
-        f_hi = along(t_hi)
-    else:
-        raise ConvergenceError(f"{failure}; no shift transmits the force")
-    ftol = max(tol, 1e-12) * q
-    if lo == 0.0:
-        # at no shift increment: the force of the previous traction on the new discs, an estimate
-        # (the step's reference is that traction as it was); solved when it is not below q
-        f_lo = -q + float(_force_of(tau0, normal) @ e)
-        if f_lo >= 0:
-            t_zero = solve(0.0, s_perp)
-            f_lo = along(t_zero)
-            if f_lo >= 0:
-                lo, f_lo, hi, f_hi, t_hi = _bracket_behind(solve, along, t_zero, f_lo, s_hi,
-                                                           s_perp, failure)
-    for _ in range(10):                     # corrections of the shift's angle
-        best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, cap)
-        if best is None:
-            break
-        perp = float(best.force @ e_perp)
-        if scalar or abs(perp) <= ftol:
-            return replace(best, iterations=iterations)
-        s_best = float((best.shift - prev_shift) @ e)
-        probe = solve(s_best, s_perp + 1e-3 * s_best)
-        # both components at once: Broyden's method from the Jacobian of the solves at hand
-        met = _broyden(solve, mismatch, np.array([s_best, s_perp]), best, probe,
-                       1e-3 * s_best, points, lambda t: float(np.abs(t.force - Q).max()) <= ftol)
-        if met is not None:
-            return replace(met, iterations=iterations)
-        # else one component at a time: a secant step across e, then the root along e again
-        slope = (float(probe.force @ e_perp) - perp) / (1e-3 * s_best)
-        if slope == 0:
-            break
-        s_perp -= perp / slope
-        # re-bracket the force along e near the last root: a small step out, doubling
-        t_mid = solve(s_best, s_perp)
-        f_mid = along(t_mid)
-        step = 0.02 * abs(s_best) * (1.0 if f_mid < 0 else -1.0)
-        far, t_far = s_best + step, None
-        for _ in range(40):
-            t_far = solve(far, s_perp)
-            if (along(t_far) < 0) != (f_mid < 0):
-                break
-            step *= 2.0
-            far = s_best + step
-        (lo, f_lo, _), (hi, f_hi, t_hi) = sorted(
-            [(s_best, f_mid, t_mid), (far, along(t_far), t_far)], key=lambda x: x[1])
-        if f_lo > 0 or f_hi < 0:
-            break
-    raise ConvergenceError(f"{failure}; the shift search did not converge either")
-
-
-def _straightened(force: float, q: float, cap: float) -> float:
-    """The force transmitted along e (N) as (μF_N − q)^½ / (μF_N − force)^½ − 1: zero at the
-    target q, increasing with the force, and nearly linear in the shift near full sliding, where
-    the deficit μF_N − force falls as 1/(s − s₀)² (``cap`` = μF_N > q)."""
-    return float(np.sqrt((cap - q) / max(cap - force, 1e-300))) - 1.0
-
-
-#: Broyden steps of the shift search before it falls back on one component at a time
-_BROYDEN_STEPS = 8
-
-
-def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
-    """The shift s e + s_perp e_perp where the force F meets Q in both components, from a root
-    along e (``t`` at x = (s, s_perp): F·e = |Q|, F·e_perp ≠ 0): Broyden's method (1965) on
-    ``mismatch``, two functions of the force that vanish at Q and are nearly linear in the
-    shift's length s and angle s_perp / s, the unknowns here. Its first Jacobian costs no
-    solve beyond ``probe`` (at x + (0, h)): the secants to it and to the nearest other solve
-    on the same line (the root search's iterates). ``met`` says when the force is met. Returns
-    the step, or None (a step that raised the mismatch tenfold, a shift along e that would
-    change sign, or ``_BROYDEN_STEPS`` spent: the caller then corrects one component at a
-    time).
-
-    Broyden, C. G. (1965). A class of methods for solving nonlinear simultaneous equations.
-    Math. Comp. 19, 577-593."""
-    def polar(s: float, s_perp: float) -> np.ndarray:
-        return np.array([s, s_perp / s])
-
-    # (not the root itself, which may come back a rounding away from x)
-    line = [(s, step) for s, sp, step in points
-            if sp == x[1] and abs(s - x[0]) > 1e-6 * abs(x[0])]
-    if not line or h == 0 or x[0] == 0:
-        return None
-    s2, t2 = min(line, key=lambda p: abs(p[0] - x[0]))
-    if s2 * x[0] <= 0:          # the angle s_perp / s is defined on one side of s = 0
-        return None
-    y, r = polar(*x), mismatch(t)
-    start = float(np.abs(r).max())
-    steps = np.column_stack([polar(s2, x[1]) - y, polar(x[0], x[1] + h) - y])
-    changes = np.column_stack([mismatch(t2) - r, mismatch(probe) - r])
+    limit = step.mu * normal.pressure
+    window = WindowStep(grid.spacing, step.tau0[cells], limit[box], contact[box], force=force,
+                        shift=shift, rigid=rigid_box)
+    out = solve_on_levels(window, normal.pair.G, normal.pair.nu, step.tol,
+                          start=None if start is None else start[cells], scalar=step.scalar,
+                          max_outer=step.max_outer, max_inner=step.max_iter,
+                          callback=step.callback)
+    if out is None:
+        return None, ("tangential solver did not converge (stick/slip set or slip directions "
+                      "kept changing); try a smaller load increment")
+    ncomp = out.traction.shape[0]
+    tau = np.zeros((2, *grid.shape))
+    tau[(slice(ncomp), *box)] = out.traction
+    ds = np.zeros(2)
+    ds[:ncomp] = out.shift
+    if shift is not None:
+        ds = shift
     try:
-        J = changes @ np.linalg.inv(steps)
-    except np.linalg.LinAlgError:
-        return None
-    for _ in range(_BROYDEN_STEPS):
-        try:
-            dy = -np.linalg.solve(J, r)
-        except np.linalg.LinAlgError:
-            return None
-        if not np.isfinite(dy).all() or (y[0] + dy[0]) * y[0] <= 0:
-            return None
-        t_new = solve(float(y[0] + dy[0]), float((y[0] + dy[0]) * (y[1] + dy[1])))
-        if met(t_new):
-            return t_new
-        r_new = mismatch(t_new)
-        if np.abs(r_new).max() > 10 * start:
-            return None
-        J = J + np.outer(r_new - r - J @ dy, dy) / float(dy @ dy)
-        y, r = y + dy, r_new
-    return None
+        return _finish(step, tau, ds, out.iterations, step.tol, rigid=step.rigid,
+                       scalar=step.scalar), ""
+    except ConvergenceError as exc:
+        return None, str(exc)
 
 
-#: the shift search's first step past a shift that transmits too little force: the root
-#: predicted from the deficit's fall as s⁻², times this margin
-_BRACKET_MARGIN = 1.05
-
-
-def _bracket_factor(f: float, q: float, cap: float, jump: int) -> float:
-    """How far to move the shift (a factor on it) after a solve that transmits too little force
-    (f = F·e − q < 0) to bracket the root. Near full sliding the deficit μF_N − F·e falls like
-    1/(s − s₀)² with s₀ >= 0 (see :func:`_root`; measured local exponents 3.5 down to 2.0 on
-    the coupled Fig. 3 run), so s (deficit / (μF_N − q))^½, the root if s₀ were 0, is at or
-    beyond it: a bracket with one solve where doubling took 1-5. Later jumps at least double
-    the shift, so a force that bends over differently is still bracketed."""
-    factor = 2.0
-    if cap > q:
-        factor = _BRACKET_MARGIN / (_straightened(q + f, q, cap) + 1.0)
-        if jump > 0:
-            factor = max(factor, 2.0)
-    return max(factor, 1.0 + 1e-3)
-
-
-def _bracket_behind(solve, along, t_zero, f_zero: float, scale: float, s_perp: float,
-                    failure: str):
-    """A bracket [lo, hi] <= 0 of the shift increment along e when the force already exceeds
-    the target with no increment (f_zero = F·e − q >= 0 at s = 0: the force falls, e.g. a
-    particle at its friction limit unloads, and the plate moves back). The force falls slowly
-    while every cell keeps slipping, then fast once cells stick, so the secant through the last
-    two solves, extended to f = 0, lies beyond the root: each step goes there (at least twice
-    as far), starting from -``scale``. Returns (lo, f_lo, hi, f_hi, step at hi)."""
-    hi, f_hi, t_hi = 0.0, f_zero, t_zero
-    lo = -scale
-    for _ in range(60):
-        t_lo = solve(lo, s_perp)
-        f_lo = along(t_lo)
-        if f_lo < 0:
-            return lo, f_lo, hi, f_hi, t_hi
-        reach = 2.0 * lo
-        if f_hi > f_lo:
-            reach = min(reach, lo - 1.5 * f_lo * (hi - lo) / (f_hi - f_lo))
-        hi, f_hi, t_hi, lo = lo, f_lo, t_lo, reach
-    raise ConvergenceError(f"{failure}; no shift transmits the force")
-
-
-class _ForceMet(Exception):
-    """Raised inside the root search once the force is met, to stop it there."""
-
-
-def _root(solve, along, lo: float, f_lo: float, hi: float, f_hi: float, t_hi, s_perp: float,
-          ftol: float, q: float, cap: float):
-    """The shift along the force that transmits it, in the bracket [lo, hi] (f_lo < 0 < f_hi,
-    f = F·e − q): Brent's method (scipy's brentq), stopped as soon as |f| <= ftol. Near full
-    sliding every cell slips at an angle ~ b_i / (s − s_i) to e, so the deficit μF_N − F·e
-    (``cap`` − F·e) falls like 1/(s − s₀)²; the search runs on s against
-    (μF_N − q)^½ / (μF_N − F·e)^½ − 1, which is then a straight line through the root: one
-    or two solves inside the bracket (the Illinois method on (s, f) took 8-11 solves, Brent on
-    log s against log(μF_N − F·e) 3). Returns the step, or None if the bracket holds no root
-    to ftol."""
-    from scipy.optimize import brentq
-
-    if abs(f_hi) <= ftol:
-        return t_hi
-    if not f_lo < 0 < f_hi:
-        return None
-    model = cap > q and f_hi < cap - q       # the deficit μF_N − F·e stays positive
-
-    def value(f: float) -> float:
-        # increasing with f, zero at the root, linear in s where the deficit goes as 1/(s − s₀)²
-        return _straightened(q + f, q, cap) if model else f
-
-    known = {lo: value(f_lo), hi: value(f_hi)}          # the bracket's ends, solved already
-    best = [t_hi, abs(f_hi)]
-
-    def g(x: float) -> float:
-        if x in known:
-            return known[x]
-        t = solve(x, s_perp)
-        f = along(t)
-        if abs(f) < best[1]:
-            best[:] = [t, abs(f)]
-        if abs(f) <= ftol:
-            raise _ForceMet
-        return value(f)
-
-    try:
-        brentq(g, lo, hi, xtol=1e-300, rtol=1e-13, maxiter=100)
-    except _ForceMet:
-        return best[0]
-    except RuntimeError:        # brentq's iteration budget
-        return None
-    return best[0] if best[1] <= ftol else None
-
-
-def _force_of(traction: np.ndarray, normal: NormalContact) -> np.ndarray:
-    return traction.reshape(2, -1).sum(axis=1) * normal.grid.cell_area
-
-
-def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=False,
-            rigid=None, spin=None, coupled=None, scalar=False):
+def _finish(step: _Step, tau: np.ndarray, ds: np.ndarray, iterations: int, tol: float, *,
+            full: bool = False, rigid: np.ndarray | None = None,
+            scalar: bool = False) -> TangentialContact:
+    """The step with traction ``tau`` (Pa) and shift increment ``ds`` (m), its slip and
+    Coulomb residual recomputed from the tractions; raises :class:`ConvergenceError` if that
+    residual is above 10 ``tol``. ``full``: a closed form (full sliding, frictionless)."""
+    normal, mu, K = step.normal, step.mu, step.K
     contact = normal.contact
     limit = mu * normal.pressure
-    du = K(tau - tau0)
+    du = K(tau - step.tau0)
     w = ds[:, None, None] - du
     if rigid is not None:
         w = w + rigid
@@ -897,28 +493,15 @@ def _finish(normal, mu, tau, tau0, ds, prev_shift, K, k0, iterations, tol, full=
     slip = contact & (norm_tau >= limit * (1 - 1e-9))
     stick = contact & ~slip
     w[:, contact & (limit <= 0)] = 0.0
-    residual = coulomb_residual(np.where(contact, tau, 0.0), w, normal.pressure, mu, k0)
+    residual = coulomb_residual(np.where(contact, tau, 0.0), w, normal.pressure, mu, step.k0)
     if not residual <= max(tol, 1e-14) * 10:
         raise ConvergenceError(f"tangential solver: Coulomb residual {residual:.3e} above "
                                f"tol {tol:.1e}")
-    displacement = K(tau) if coupled is None else K(tau) + coupled
+    displacement = K(tau) if step.coupled is None else K(tau) + step.coupled
     return TangentialContact(
-        traction=tau, displacement=displacement, shift=prev_shift + ds,
-        force=_force_of(tau, normal), stick=stick, slip=slip,
+        traction=tau, displacement=displacement, shift=step.prev_shift + ds,
+        force=step.force_of(tau), stick=stick, slip=slip,
         slip_increment=w, mu=float(mu), normal=normal, iterations=iterations,
-        residual=residual, converged=True, full_sliding=bool(full or not stick.any()),
-        **(spin or {}))
-
-
-def _full_sliding(normal, mu, e, tau0, prev_shift, K, rigid=None, coupled=None):
-    """τ = μp e everywhere in contact. The shift is the smallest one consistent with every cell
-    slipping along e: the plate has moved at least as far as the furthest surface point."""
-    tau = mu * normal.pressure * e[:, None, None]
-    tau[:, ~normal.contact] = 0.0
-    du = K(tau - tau0)
-    if rigid is not None:
-        du = du - rigid
-    along = (du * e[:, None, None]).sum(axis=0)[normal.contact].max()
-    ds = e * along
-    return _finish(normal, mu, tau, tau0, ds, prev_shift, K, K.self_terms[0], 0, 1.0, full=True,
-                   rigid=rigid, coupled=coupled)
+        residual=residual, converged=bool(full or residual <= tol),
+        full_sliding=bool(full or not stick.any()),
+        twist=step.twist, twist_centre=step.twist_centre)

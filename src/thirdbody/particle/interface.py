@@ -28,8 +28,8 @@ from ..bem import (
     NormalContact,
     TangentialContact,
     solve_normal,
-    solve_tangential,
 )
+from ..bem.tangential import restart_traction, solve_tangential_from
 from ..material import Material
 from ..orientation import key
 from ..state import WarmStart
@@ -234,12 +234,22 @@ class Interface:
     def solve_tangential(self, solution: InterfaceNormal, mu: float, force: tuple[float, float],
                          previous: tuple[Window, TangentialContact] | None = None,
                          twist: float | None = None, coupling: bool = False,
-                         _initial: np.ndarray | None = None) -> TangentialContact:
+                         restart: tuple[Window, TangentialContact] | None = None,
+                         ) -> TangentialContact:
         """Partial-slip solve with the prescribed tangential force (N, on the particle) at this
         interface, carrying the history of ``previous`` (its window and its step) when given.
         ``twist``: the plate's total rotation about the particle's vertical axis, rad (default:
         the previous step's). ``coupling``: the pressure's change since ``previous`` (from zero
-        without it) moves the surface tangentially (:func:`~thirdbody.bem.solve_tangential`)."""
+        without it) moves the surface tangentially (:func:`~thirdbody.bem.solve_tangential`).
+        ``restart``: a step of the same load under a slightly different pressure (its window
+        and step, e.g. the last coupled pass), to start the iteration from: its slip cells on
+        their new friction limit (:func:`~thirdbody.bem.tangential.restart_traction`)."""
+        start = None
+        if restart is not None:
+            r_window, r_step = restart
+            start = restart_traction(remap(r_step.traction, r_window, solution.window),
+                                     remap(r_step.slip, r_window, solution.window) > 0.5,
+                                     solution.contact, mu)
         prev = None
         pressure = np.zeros(solution.window.ny * solution.window.nx).reshape(
             solution.window.ny, solution.window.nx)
@@ -248,10 +258,10 @@ class Interface:
             traction = remap(p_step.traction, p_window, solution.window)
             prev = replace(p_step, traction=traction)
             pressure = remap(p_step.normal.pressure, p_window, solution.window)
-        return solve_tangential(solution.contact, mu, force=np.asarray(force, dtype=float),
-                                previous=prev, tol=self.tol, twist=twist, coupling=coupling,
-                                previous_pressure=pressure if coupling else None,
-                                _initial=_initial)
+        return solve_tangential_from(start, solution.contact, mu,
+                                     force=np.asarray(force, dtype=float), previous=prev,
+                                     tol=self.tol, twist=twist, coupling=coupling,
+                                     previous_pressure=pressure if coupling else None)
 
 
 def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,

@@ -11,11 +11,10 @@ from __future__ import annotations
 import math
 
 from ..bem import ContactAtEdgeError, ConvergenceError, TangentialContact
-from ..bem.tangential import restart_traction
 from ..orientation import Rotation, key
 from ..state import ParticleState, WarmStart
 from .compliance import Compliance
-from .interface import remap, surface_approach
+from .interface import surface_approach
 from .model import Particle, Plates
 from .statics import Evaluation, PairStatics
 from .surface import LOWER, UPPER
@@ -149,16 +148,10 @@ class Member:
         out = {}
         for side, sol, sign, mu in sides:
             force = (sign * float(demand[0]) + 0.0, sign * float(demand[1]) + 0.0)
-            initial = None
-            if warm and side in warm:
-                # the last coupled pass's step starts this one (see restart_traction)
-                window, last = warm[side]
-                initial = restart_traction(remap(last.traction, window, sol.window),
-                                           remap(last.slip, window, sol.window) > 0.5,
-                                           sol.contact, mu)
+            # the last coupled pass's step (if any) starts this one
             out[side] = self.interfaces[side].solve_tangential(
                 sol, mu, force, history.get(side), twist=twist, coupling=self.coupling,
-                _initial=initial)
+                restart=warm.get(side) if warm else None)
         return out
 
     def _shear(self, ev: Evaluation,
