@@ -37,6 +37,11 @@ def test_a_coarse_cell_size_is_named_as_set():
      "load.forces: give at least 1 value(s); got 0"),
     ('shape = "potato"', 'shape = "cube"',
      "particle.shape = 'cube': not one of 'sphere', 'ellipsoid', 'potato', 'mesh'"),
+    ('shape = "potato"', 'form = "potato"',
+     "particle.shape: required key missing (one of 'sphere', 'ellipsoid', 'potato', 'mesh')"),
+    ('program = "linear_ramp"', 'kind = "linear_ramp"',
+     "load.program: required key missing (one of 'linear_ramp', 'hold_then_ramp', "
+     "'force_table', 'gap_ramp')"),
     ("E = 1.0e9", "E = -1.0", "particle.E = -1.0: must be > 0.0"),
     ("orientation_deg = 20.0", "orientation_deg = 20.0\nquaternion = [0.0, 0.0, 0.0, 1.0]",
      "particle: give either a tilt (orientation_deg, tilt_axis_deg, yaw_deg) or a quaternion, "
@@ -80,3 +85,18 @@ def test_print_config_writes_the_resolved_values():
     assert resolved["load"]["start"] == pytest.approx(10.0 / 30)
     again = parse_config(resolved)                       # and it reads back the same run
     assert again.build()[2].schedule() == parse_config(tomllib.loads(FIG3)).build()[2].schedule()
+
+
+def test_the_missing_tag_lists_what_a_wrong_tag_lists():
+    """A missing ``shape``/``program`` names the allowed values, the same ones pydantic names
+    for a wrong value (taken from the models), so the two lists cannot drift apart."""
+    import tomllib
+
+    def refusal(old, new):
+        with pytest.raises(ValueError) as refused:
+            parse_config(tomllib.loads(FIG3.replace(old, new)), source="c.toml")
+        return str(refused.value).rsplit("(one of ", 1)[-1].rsplit("not one of ", 1)[-1]
+
+    for old, missing, wrong in [('shape = "potato"', 'form = "potato"', 'shape = "cube"'),
+                                ('program = "linear_ramp"', 'kind = "x"', 'program = "x"')]:
+        assert refusal(old, missing).rstrip(")") == refusal(old, wrong)

@@ -217,7 +217,7 @@ def _particle_run(nu: float, coupling: bool, tilt_axis: float = 90.0, yaw: float
                                     20.0, tilt_axis, yaw),
                         tb.Plates(0.6), tb.LinearRamp(stop=2.0, steps=steps), resolution=40,
                         maps_every=0, coupling=coupling)
-    return sim.run()
+    return tb.particle_view(sim.run(), 0)
 
 
 def test_particle_with_nu_one_half_is_the_uncoupled_particle_bit_for_bit():

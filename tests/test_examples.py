@@ -58,8 +58,9 @@ def test_paper_figure5_example_runs(tmp_path):
 
     results = paper_figures.main(["--figure", "5", "--out", str(tmp_path), "--steps", "4",
                                   "--resolution", "40", "--maps-every", "2"])
-    (ds,) = results.values()
-    assert ds.attrs["status"] == "complete"
+    (run,) = results.values()
+    assert run.attrs["status"] == "complete"
+    ds = thirdbody.particle_view(run, 0)
     names = ds.state.attrs["flag_meanings"].split()
     assert names[int(ds.state[0])] == "roll_lower"          # μ_up < μ_low: rolls on the lower
     slip = ds.slip.sel(component="x")
@@ -83,7 +84,7 @@ def test_fig4c_turns_once_then_its_tangential_force_changes_sign():
     particle, plates, _, numerics = config.build()
     numerics.update(resolution=50.0, maps_every=0)
     sim = Simulation(particle, plates, thirdbody.LinearRamp(stop=10.0, steps=10), **numerics)
-    ds = sim.run()
+    ds = thirdbody.particle_view(sim.run(), 0)
     assert sim.status == "complete"
     assert ds.turned.values.tolist() == [1] + [0] * 9
     assert 8.0 < float(ds.rotation_angle[0]) < 10.5

@@ -57,13 +57,13 @@ def _validation_rows() -> list[tuple[str, float, float, float]]:
     A, B, C = 1e-3, 0.8e-3, 0.6e-3
     sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), mat, 20.0), tb.Plates(0.6),
                         tb.ForceTable([0.5]), resolution=400, maps_every=0)
-    ds = sim.run()
+    ds = tb.particle_view(sim.run(), 0)
     rows.append(("rigid criterion: steel ellipsoid θ=20°, |F'_x|/F_N",
                  float(np.abs(ds.tangential_force.sel(component="x")[0]) / ds.normal_force[0]),
                  rigid.ellipsoid_xi(A, C, math.radians(20.0)), 2e-3))
     sim = tb.Simulation(tb.Particle(Ellipsoid((A, B, C)), mat, 20.0), tb.Plates(0.3),
                         tb.ForceTable([1.0]), resolution=100, maps_every=0)
-    ds = sim.run()
+    ds = tb.particle_view(sim.run(), 0)
     rows.append(("rigid equilibrium angle, μ=0.3 (deg)",
                  float(ds.orientation.sel(component="y")[0]),
                  math.degrees(rigid.ellipsoid_equilibrium_angle(A, C, math.radians(20.0), 0.3)),

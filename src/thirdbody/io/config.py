@@ -385,8 +385,11 @@ def _sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
-_TAGS = ("sphere", "ellipsoid", "potato", "mesh", "linear_ramp", "hold_then_ramp",
-         "force_table", "gap_ramp")
+_SHAPES = ("sphere", "ellipsoid", "potato", "mesh")
+_PROGRAMS = ("linear_ramp", "hold_then_ramp", "force_table", "gap_ramp")
+_TAGS = _SHAPES + _PROGRAMS
+# the allowed values of each tagged choice (pydantic names them only when the tag is wrong)
+_CHOICES = {"shape": ", ".join(map(repr, _SHAPES)), "program": ", ".join(map(repr, _PROGRAMS))}
 _BOUNDS = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
 
 
@@ -419,8 +422,9 @@ def _error_line(err: dict) -> str | None:
     if kind == "extra_forbidden":
         return f"{key}: unknown key"
     if kind in ("union_tag_invalid", "union_tag_not_found"):
-        tags = ctx.get("expected_tags", "")
-        where = f"{key}.{ctx.get('discriminator', '').strip(chr(39))}"
+        name = ctx.get("discriminator", "").strip("'")
+        tags = ctx.get("expected_tags") or _CHOICES.get(name, "")
+        where = f"{key}.{name}"
         if kind == "union_tag_not_found":
             return f"{where}: required key missing (one of {tags})"
         return f"{where} = {ctx.get('tag')!r}: not one of {tags}"

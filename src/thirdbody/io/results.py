@@ -106,8 +106,8 @@ def upgrade(ds):
     from ..records import _dim_attrs, _events_from_arrays
 
     version = file_format(ds)
-    if version >= schema.FORMAT_VERSION:
-        return ds
+    if version >= schema.FORMAT_VERSION or "step" not in ds.dims:
+        return ds       # today's form, or not a results file (the caller says so)
     inputs = json.loads(ds.attrs.get("inputs", "{}"))
     if "particle" not in ds.dims:
         layer_level = {v.name for v in schema.by_kind("step")} & set(ds.data_vars)
