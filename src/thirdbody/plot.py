@@ -153,7 +153,9 @@ def state_curve(ds, labels: dict[int, str] | None = None):
                   + "\n" + r"(negative: $F_T$ opposite to its first direction)")
     ax.set_ylim(lowest - 0.05 * (top - lowest), top)
     ax.set_xlim(0, float(c.max()) * 1.02 if c.size else 1)
-    ax.legend(fontsize=8, loc="lower right")
+    # below the axes: a curve may run anywhere in them (down to negative ratios)
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=8, loc="outside lower center",
+               ncols=3)
     ax.set_title(_title(ds), fontsize=9)
     return fig
 
