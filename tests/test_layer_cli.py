@@ -92,7 +92,7 @@ def test_run_a_listed_layer_then_export_it_for_paraview(tmp_path):
     vtk = tmp_path / "vtk"
     result = runner.invoke(app, ["export-vtk", str(out / "results.nc"), str(vtk)])
     assert result.exit_code == 0, result.output
-    assert (vtk / "layer.pvd").exists() and len(list(vtk.glob("step_*.vtu"))) == 2
+    assert (vtk / "results.pvd").exists() and len(list(vtk.glob("particles_*.vtu"))) == 2
 
 
 def test_bad_layer_inputs_exit_2_and_write_nothing(tmp_path):

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 import thirdbody as tb
 from thirdbody import plot, shapes
-from thirdbody.plot import layer_top_view, load_shares, particle_ratios, save_all, state_fractions
+from thirdbody.plot import layer_top_view, load_shares, particle_ratios, save_all
 
 matplotlib.use("Agg")
 
@@ -228,16 +228,6 @@ def test_load_shares_stack_every_particle_and_name_the_largest_carriers():
     labels = [t.get_text() for t in fig.legends[0].get_texts()]
     assert [t.split(" (")[0] for t in labels[:4]] == ["particle 0", "particle 1",
                                                       "particle 3", "particle 2"]
-
-
-def test_state_fractions_against_the_compression_in_percent():
-    ds = synthetic()
-    fig = state_fractions(ds)
-    ax, twin = fig.axes[:2]
-    lines = {line.get_label(): line for line in ax.get_lines()}
-    assert lines["stick"].get_xdata() == pytest.approx(100 * ds.compression.values)
-    assert lines["roll"].get_ydata() == pytest.approx(ds.fraction_roll.values)
-    assert twin.get_lines()[0].get_ydata() == pytest.approx(ds.loaded.values)
 
 
 def test_particle_ratios_one_line_per_loaded_particle_from_the_lower_interface():

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["contact_maps", "layer_top_view", "load_shares", "orientation_history",
-           "particle_ratios", "save_all", "save_state_map", "state_curve", "state_fractions",
-           "state_map"]
+           "particle_ratios", "quantity_label", "save_all", "save_state_map", "state_curve",
+           "state_fractions", "state_map"]
 
 _STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
 
@@ -46,17 +46,36 @@ def _inputs(ds) -> dict:
     return json.loads(ds.attrs.get("inputs", "{}"))
 
 
+def _mu_text(inputs: dict) -> str:
+    """The friction coefficients as mathtext: "μ = 0.3", or both plates' when they differ."""
+    nan = float("nan")
+    up, low = inputs.get("mu_up", nan), inputs.get("mu_low", nan)
+    if up == low:
+        return f"$\\mu$ = {up:g}"
+    return f"$\\mu_\\mathrm{{up}}$ = {up:g}, $\\mu_\\mathrm{{low}}$ = {low:g}"
+
+
 def _title(ds) -> str:
     i = {k: v for k, v in _inputs(ds).items() if v is not None}
     nan = float("nan")
-    up, low = i.get("mu_up", nan), i.get("mu_low", nan)
-    mu = f"μ = {up:g}" if up == low else f"μ_up = {up:g}, μ_low = {low:g}"
-    start = f"θ₀ = {i.get('orientation_deg', nan):g}°"
+    start = f"$\\theta_0$ = {i.get('orientation_deg', nan):g}°"
     if i.get("tilt_axis_deg", 90.0) != 90.0 or i.get("yaw_deg", 0.0) != 0.0:
         start += f" about azimuth {i.get('tilt_axis_deg', nan):g}°"
         if i.get("yaw_deg", 0.0):
             start += f", yaw {i['yaw_deg']:g}°"
-    return f"E = {i.get('E', nan) / 1e9:g} GPa, ν = {i.get('nu', nan):g}, {mu}, {start}"
+    return (f"$E$ = {i.get('E', nan) / 1e9:g} GPa, $\\nu$ = {i.get('nu', nan):g}, "
+            f"{_mu_text(i)}, {start}")
+
+
+def _integer_steps(axis) -> None:
+    """Ticks of a load-step axis at whole steps only."""
+    from matplotlib.ticker import MaxNLocator
+
+    axis.set_major_locator(MaxNLocator(integer=True))
+
+
+#: the compression ratio's axis label (mathtext)
+_COMPRESSION = "compression $(d_0 - h)/d_0$"
 
 
 def _initial_tilt(ds) -> np.ndarray:
@@ -91,41 +110,52 @@ def _signed(ds) -> np.ndarray:
 def state_curve(ds, labels: dict[int, str] | None = None):
     """F_T/(μF_N) against the compression ratio (d₀ − h)/d₀ (the paper's Figs. 3a, 4, 5a).
 
-    The stick region (ratio < 1) is shaded, the slip line at 1 drawn; with unequal μ there is
-    one curve per interface. The sign says whether the lower plate pushes the way it did at
-    the start (+) or the opposite way (−). Steps in which the particle turned are marked.
-    ``labels`` maps step indices to letters written next to the curve.
+    The slip limit at 1 is drawn, and the stick region below it is shaded from the lowest
+    plotted value up; with unequal μ there is one curve per interface, each over its own μ.
+    The sign says whether the lower plate pushes the way it did at the start (+) or the
+    opposite way (−). Steps in which the particle turned are marked. ``labels`` maps step
+    indices to letters written next to the curve.
     """
     plt = _plt()
     ds = _one(ds)
     i = _inputs(ds)
     c = ds.compression.values
-    ratio = {side: ds.ratio.sel(interface=side).values for side in ("upper", "lower")}
-    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
-    finite = np.abs(ratio["lower"])[np.isfinite(ratio["lower"])]
-    top = max(1.2, float(finite.max(initial=0.0)) * 1.1)
-    ax.axhspan(-top, 1.0, color="0.88", zorder=0, label="stick (partial slip)")
-    ax.axhline(1.0, color="tab:red", lw=1.5, label="slip: F_T = μF_N")
     sign = _signed(ds)
+    signed = {side: ds.ratio.sel(interface=side).values * sign for side in ("upper", "lower")}
     equal = i.get("mu_up") == i.get("mu_low")
-    curves = [("lower", "F_T/(μF_N)" if equal else "lower: F_T/(μ_low F_N)", "tab:blue", "o")]
+    curves = [("lower", r"$F_T/(\mu F_N)$", "tab:blue", "o")]
     if not equal:
-        curves = [("upper", "upper: F_T/(μ_up F_N)", "tab:blue", "*"),
-                  ("lower", "lower: F_T/(μ_low F_N)", "tab:red", "^")]
+        curves = [("upper", r"upper plate: $F_T/(\mu_\mathrm{up} F_N)$", "tab:blue", "*"),
+                  ("lower", r"lower plate: $F_T/(\mu_\mathrm{low} F_N)$", "tab:red", "^")]
+    plotted = np.concatenate([signed[side] for side, *_ in curves])
+    plotted = plotted[np.isfinite(plotted)]
+    top = max(1.2, float(np.abs(plotted).max(initial=0.0)) * 1.1)
+    lowest = min(0.0, float(plotted.min(initial=0.0)))
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    ax.axhspan(lowest, 1.0, color="0.9", zorder=0, gid="stick region",
+               label=r"stick: $F_T < \mu F_N$ (partial slip)")
+    ax.axhline(1.0, color="tab:red", lw=1.5, zorder=1, gid="slip limit",
+               label=r"slip limit: $F_T = \mu F_N$")
     for side, label, colour, marker in curves:
-        ax.plot(c, ratio[side] * sign, marker=marker, ms=4, color=colour, lw=1.2, label=label)
+        ax.plot(c, signed[side], marker=marker, ms=4, color=colour, lw=1.2, label=label,
+                zorder=2)
     turned = ds.turned.values.astype(bool)
     if turned.any():
-        ax.plot(c[turned], np.ones(turned.sum()), "x", color="k", ms=6, label="turned")
+        ax.plot(c[turned], np.ones(turned.sum()), "x", color="k", ms=6, zorder=3,
+                label="turned in the step")
     for step, text in (labels or {}).items():
         k = int(np.flatnonzero(ds.step.values == step)[0])
-        ax.annotate(text, (c[k], ratio["lower"][k] * sign[k]), textcoords="offset points",
+        ax.annotate(text, (c[k], signed["lower"][k]), textcoords="offset points",
                     xytext=(4, 6), fontsize=11, fontweight="bold")
-    ax.set_xlabel("compression (d₀ − h)/d₀")
-    ax.set_ylabel("± F_T / (μ F_N)   (−: F' against its first direction)")
-    ax.set_ylim(min(-0.2, float(np.nanmin(ax.get_ylim()))), top)
+    ax.set_xlabel(_COMPRESSION)
+    ax.set_ylabel("friction ratio " + (r"$F_T/(\mu F_N)$" if equal else
+                                       r"$F_T/(\mu F_N)$ at each plate")
+                  + "\n" + r"(negative: $F_T$ opposite to its first direction)")
+    ax.set_ylim(lowest - 0.05 * (top - lowest), top)
     ax.set_xlim(0, float(c.max()) * 1.02 if c.size else 1)
-    ax.legend(fontsize=8, loc="lower right")
+    # below the axes: a curve may run anywhere in them (down to negative ratios)
+    fig.legend(*ax.get_legend_handles_labels(), fontsize=8, loc="outside lower center",
+               ncols=3)
     ax.set_title(_title(ds), fontsize=9)
     return fig
 
@@ -151,7 +181,7 @@ def orientation_history(ds):
     tilt = ds.orientation.transpose("step", "component").values
     if planar:
         a1.plot(c, tilt[:, 1], "o-", ms=3)
-        a1.set_ylabel("orientation θ about y (°)")
+        a1.set_ylabel(r"orientation $\theta$ about $y$ (°)")
     else:
         a1.plot(c, tilt[:, 0], "o-", ms=3, label="tilt vector x")
         a1.plot(c, tilt[:, 1], "s-", ms=3, label="tilt vector y")
@@ -169,7 +199,7 @@ def orientation_history(ds):
         a2.plot(c, ds.slip.sel(interface="lower", component=comp).values * 1e6,
                 linestyle=lower, color="tab:red", label="slip, lower" + suffix)
     a2.set_ylabel("displacement (µm)")
-    a2.set_xlabel("compression (d₀ − h)/d₀")
+    a2.set_xlabel(_COMPRESSION)
     a2.legend(fontsize=7, ncols=2)
     a1.set_title(_title(ds), fontsize=9)
     if not planar:
@@ -283,7 +313,7 @@ def contact_maps(ds, steps: list[int] | None = None):
                 ax.set_ylabel("y (µm)")
                 _scale_bar(ax, float(extent[1] - extent[0]))
             if col == 1:
-                fig.colorbar(im, ax=ax_p, label="p (MPa)", shrink=0.8)
+                fig.colorbar(im, ax=ax_p, label="pressure $p$ (MPa)", shrink=0.8)
     handles = [Patch(facecolor=col, edgecolor="k", label=name)
                for col, name in zip(_STATUS_COLOURS, ("open", "stick", "slip"), strict=True)]
     fig.legend(handles=handles, loc="outside lower center", ncols=3, fontsize=8)
@@ -335,10 +365,56 @@ _BEHAVIOUR_COLOURS = {"stick": "#4c72b0", "roll_upper": "#dd8452", "roll_lower":
                       "rotate": "#55a868", "failed": "0.35", "error": "black", "missing": "white"}
 
 
+#: the quantity a configuration key sets, as an axis label (mathtext); its units come from
+#: :func:`thirdbody.schema.parameter_units`
+QUANTITIES: dict[str, str] = {
+    "plates.mu": r"$\mu$", "plates.mu_up": r"$\mu_\mathrm{up}$",
+    "plates.mu_low": r"$\mu_\mathrm{low}$",
+    "particle.orientation_deg": r"$\theta_0$", "particle.tilt_axis_deg": "tilt axis azimuth",
+    "particle.yaw_deg": "yaw", "particle.azimuth_deg": "azimuth of the whole orientation",
+    "particle.E": r"$E$", "particle.nu": r"$\nu$", "particle.radius": "radius",
+    "particle.semi_axes": "semi-axes", "particle.amplitude": "wave amplitude",
+    "particle.seed": "shape seed", "particle.n_waves": "number of waves",
+    "particle.scale": "mesh scale", "load.stop": "final load", "load.hold": "held load",
+    "load.steps": "load steps", "numerics.resolution": "resolution",
+    "numerics.cell_size": "cell size", "layer.size": "mean particle size",
+    "layer.size_std": "standard deviation of the size", "layer.count": "particle count",
+    "layer.area_fraction": "area fraction", "layer.max_tilt_deg": "largest initial tilt",
+    "layer.seed": "layer seed", "layer.E": r"$E$", "layer.nu": r"$\nu$",
+}
+
+#: how a unit is written after a quantity (none for a pure number)
+_UNIT_TEXT = {"1": "", "degree": "°"}
+
+
+def quantity_label(key: str, units: str | None = None) -> str:
+    """An axis label for the configuration key ``key``: the quantity it sets and its units,
+    "θ₀ (°)" for ``particle.orientation_deg``, "E (Pa)" for ``particle.E``; an unlisted key
+    is written as it is. ``units`` (default: :func:`thirdbody.schema.parameter_units`)."""
+    from .schema import parameter_units
+
+    units = parameter_units(key) if units is None else units
+    units = _UNIT_TEXT.get(units, units)
+    name = QUANTITIES.get(key, key)
+    return f"{name} ({units})" if units else name
+
+
 def _axis_label(ds, name: str) -> str:
-    units = ds[name].attrs.get("units", "")
     key = ds[name].attrs.get("config_key", name)
-    return f"{key} ({units})" if units and units != "1" else key
+    units = ds[name].attrs.get("units") if key not in QUANTITIES else None
+    return quantity_label(key, units)
+
+
+def _value_text(ds, name: str, value) -> str:
+    """"θ₀ = 30°", "μ = 0.2": one value of a sweep axis, for a panel's title."""
+    from .schema import parameter_units
+
+    key = ds[name].attrs.get("config_key", name)
+    text = f"{value:g}" if isinstance(value, float) else str(value)
+    if key not in QUANTITIES:
+        return f"{key} = {text}"
+    units = parameter_units(key)
+    return f"{QUANTITIES[key]} = {text}{_UNIT_TEXT.get(units, ' ' + units)}"
 
 
 def _ticks(ds, name: str | None) -> tuple[range, list[str]]:
@@ -347,6 +423,23 @@ def _ticks(ds, name: str | None) -> tuple[range, list[str]]:
         return range(0), []
     values = ds[name].values.tolist()
     return range(len(values)), [f"{v:g}" if isinstance(v, float) else str(v) for v in values]
+
+
+def _force_scale(force: np.ndarray):
+    """The colour scale of the first-turn forces: over their range, with no text; or, when
+    they are all equal (or there are none), a scale that puts them mid-way and a text that
+    says so instead of a colour bar."""
+    from matplotlib.colors import Normalize
+
+    finite = force[np.isfinite(force)]
+    if not finite.size:
+        return Normalize(0.0, 1.0), "no case turned"
+    lo, hi = float(finite.min()), float(finite.max())
+    if hi - lo <= 1e-9 * max(abs(hi), 1e-300):
+        return Normalize(lo - 1.0, hi + 1.0), (f"every case that turned did so at {hi:.3g} N"
+                                             if finite.size > 1 else f"one case turned, at "
+                                             f"{hi:.3g} N")
+    return Normalize(lo, hi), None
 
 
 def state_map(summary, x: str | None = None, y: str | None = None):
@@ -374,11 +467,12 @@ def state_map(summary, x: str | None = None, y: str | None = None):
     cmap = ListedColormap([_BEHAVIOUR_COLOURS[m] for m in meanings])
     fig, axes = plt.subplots(len(combos), 2, figsize=(11, 4.2 * len(combos) + 0.4),
                              squeeze=False, constrained_layout=True)
-    force_max = float(np.nanmax(summary.first_turn_force.values, initial=0.0))
+    norm, force_text = _force_scale(summary.first_turn_force.values)
     for row, combo in enumerate(combos):
         sel = {d: i for d, i in zip(rest, combo, strict=True)}
         part = summary.isel(sel)
-        where = ", ".join(f"{d} = {summary[d].values[i]}" for d, i in sel.items())
+        where = ", ".join(_value_text(summary, d, summary[d].values[i].item())
+                          for d, i in sel.items())
         order = (y, x) if y else (x,)
         behaviour = part.behaviour.transpose(*order).values.reshape(-1, part.sizes[x])
         rotation = part.total_rotation.transpose(*order).values.reshape(behaviour.shape)
@@ -404,18 +498,19 @@ def state_map(summary, x: str | None = None, y: str | None = None):
         masked = np.ma.masked_invalid(force)
         ax_f.set_facecolor("0.88")
         im = ax_f.imshow(masked, origin="lower", cmap="magma_r", aspect="auto",
-                         interpolation="nearest", vmin=0, vmax=force_max or 1.0)
-        fig.colorbar(im, ax=ax_f, label="normal force at the first turn (N)", shrink=0.85)
+                         interpolation="nearest", norm=norm)
+        if force_text is None:          # a range of forces: a colour bar over it
+            fig.colorbar(im, ax=ax_f, label="normal force at the first turn (N)", shrink=0.85)
         for (i, j), f in np.ndenumerate(force):
             if f == f:
-                dark = f > 0.5 * (force_max or 1.0)
                 ax_f.text(j, i, f"{f:.3g} N", ha="center", va="center", fontsize=7,
-                          color="white" if dark else "black")
+                          color="white" if norm(f) > 0.5 else "black")
         what = ("first turn; final fractions rolling, rotating" if layer
                 else "behaviour, total rotation")
         ax_b.set_title(what + (f" ({where})" if where else ""), fontsize=9)
-        ax_f.set_title("first turn (grey: never turned)" + (f" ({where})" if where else ""),
-                       fontsize=9)
+        ax_f.set_title("normal force at the first turn (grey: never turned)"
+                       + (f"\n{force_text}" if force_text else "")
+                       + (f" ({where})" if where else ""), fontsize=9)
         for ax in (ax_b, ax_f):
             ax.set_xticks(*_ticks(summary, x))
             ax.set_xlabel(_axis_label(summary, x))
@@ -457,12 +552,8 @@ def _state_colour(name: str) -> str:
 
 
 def _layer_title(ds) -> str:
-    i = _inputs(ds)
-    nan = float("nan")
-    up, low = i.get("mu_up", nan), i.get("mu_low", nan)
-    mu = f"μ = {up:g}" if up == low else f"μ_up = {up:g}, μ_low = {low:g}"
     status = ds.attrs.get("status", "complete")
-    return (f"layer of {ds.sizes['particle']} particles, {mu}"
+    return (f"layer of {ds.sizes['particle']} particles, {_mu_text(_inputs(ds))}"
             + ("" if status == "complete" else f" ({status})"))
 
 
@@ -620,7 +711,7 @@ def layer_top_view(ds, steps: list[int] | None = None, layer=None):
         ax.scatter(cx[panel] * 1e3, cy[panel] * 1e3, s=scale * force[k], c=colours,
                    edgecolors="k", linewidths=0.5, zorder=3, gid="normal force")
         c = float(ds.compression.values[k])
-        ax.set_title(f"step {step}: c = {100 * c:.2f} %, F_N = "
+        ax.set_title(f"step {step}: c = {100 * c:.2f} %, $F_N$ = "
                      f"{float(ds.total_force.values[k]):.3g} N, "
                      f"{int(ds.loaded.values[k])} loaded\n{outline}", fontsize=8)
         ax.set_xlim(*xlim)
@@ -663,17 +754,18 @@ def load_shares(ds):
     colours = [palette[j % 10] for j in range(len(carriers))] \
         + [("0.72", "0.84")[j % 2] for j in range(len(others))]
     labels = [f"particle {i} (up to {100 * largest[i]:.0f} %)" for i in carriers] \
-        + [f"{len(others)} others" if j == 0 else "_nolegend_" for j in range(len(others))]
+        + [f"+ {len(others)} others" if j == 0 else "_nolegend_" for j in range(len(others))]
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
     ax.stackplot(steps, share[:, carriers + others].T, colors=colours, labels=labels,
                  edgecolor="white", linewidth=0.3)
     ax.set_xlabel("load step")
+    _integer_steps(ax.xaxis)
     ax.set_ylabel("share of the total normal force")
     ax.set_ylim(0, 1.0)
     ax.set_xlim(float(steps.min(initial=0)), float(steps.max(initial=1)))
     twin = ax.twinx()
     twin.plot(steps, ds.total_force.values, color="k", lw=1.2, ls="--")
-    twin.set_ylabel("total normal force F_N (N), dashed")
+    twin.set_ylabel("total normal force $F_N$ (N), dashed")
     twin.set_ylim(0, None)
     fig.legend(*ax.get_legend_handles_labels(), fontsize=7, loc="outside lower center",
                ncols=3, title=f"{n} particles, bottom up", title_fontsize=7)
@@ -682,39 +774,85 @@ def load_shares(ds):
 
 
 def state_fractions(ds):
-    """The fractions of the loaded particles that stuck, rolled (about either plate) and
-    rotated in each step against the compression ratio (%), with the number of loaded
-    particles on the right-hand axis."""
+    """What the loaded particles did in each load step: stacked bars of the fractions that
+    stuck, rolled (about either plate), rotated and failed, with the number of loaded
+    particles on the right-hand axis and the compression ratio (%) along the top."""
     plt = _plt()
-    from matplotlib.ticker import MaxNLocator
+    from matplotlib.ticker import FuncFormatter
 
-    c = 100 * ds.compression.values
+    steps = ds.step.values
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
-    for name, label, colour, marker in (("fraction_stick", "stick", "stick", "o"),
-                                        ("fraction_roll", "roll", "roll_upper", "s"),
-                                        ("fraction_rotate", "rotate", "rotate", "^")):
-        ax.plot(c, ds[name].values, marker=marker, ms=4, lw=1.3, color=_state_colour(colour),
-                label=label)
-    ax.set_ylim(-0.03, 1.03)
-    ax.set_xlabel("compression (d₀ − h)/d₀ (%)")
+    bottom = np.zeros(len(steps))
+    state = ds.state.transpose("step", "particle").values
+    names = _state_names(ds)
+    failed = ((state == names.index("failed")).sum(axis=1) if "failed" in names
+              else np.zeros(len(steps)))
+    fractions = {name: np.nan_to_num(ds[name].values.astype(float))
+                 for name in ("fraction_stick", "fraction_roll", "fraction_rotate")}
+    fractions["fraction_failed"] = failed / np.maximum(ds.loaded.values, 1)
+    for name, label, colour in (("fraction_stick", "stick", "stick"),
+                                ("fraction_roll", "roll", "roll_upper"),
+                                ("fraction_rotate", "rotate", "rotate"),
+                                ("fraction_failed", "failed", "failed")):
+        if name == "fraction_failed" and not fractions[name].any():
+            continue
+        ax.bar(steps, fractions[name], width=0.8, bottom=bottom, color=_state_colour(colour),
+               label=label, gid=name)
+        bottom += fractions[name]
+    ax.set_ylim(0, 1.0)
+    ax.set_xlim(float(steps.min(initial=0)) - 0.6, float(steps.max(initial=0)) + 0.6)
+    ax.set_xlabel("load step")
+    _integer_steps(ax.xaxis)
     ax.set_ylabel("fraction of the loaded particles")
     twin = ax.twinx()
-    twin.step(c, ds.loaded.values, where="mid", color="0.35", lw=1.2, ls="--",
-              label="loaded particles")
+    twin.step(steps, ds.loaded.values, where="mid", color="k", lw=1.2, ls="--",
+              label="loaded particles (right)")
     twin.set_ylim(0, ds.sizes["particle"] + 0.5)
-    twin.yaxis.set_major_locator(MaxNLocator(integer=True))
+    _integer_steps(twin.yaxis)
     twin.set_ylabel("loaded particles")
+    # along the top, the compression of the steps the bottom axis names
+    compression = dict(zip(steps.tolist(), 100 * ds.compression.values, strict=True))
+    top = ax.secondary_xaxis("top")
+    _integer_steps(top.xaxis)
+    top.xaxis.set_major_formatter(FuncFormatter(
+        lambda t, _: f"{compression[round(t)]:.1f}" if round(t) in compression else ""))
+    top.set_xlabel(_COMPRESSION + " (%)", fontsize=8)
+    top.tick_params(labelsize=8)
     handles = ax.get_legend_handles_labels()[0] + twin.get_legend_handles_labels()[0]
-    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncols=4)
+    fig.legend(handles=handles, fontsize=8, loc="outside lower center", ncols=len(handles))
     ax.set_title(_layer_title(ds), fontsize=9)
     return fig
 
 
+#: particles named in the friction-ratio figure; more are drawn grey and counted
+_NAMED = 8
+
+
+def _stacked_widths(lines: np.ndarray, tol: float, base: float = 1.2,
+                    extra: float = 1.3) -> list[float]:
+    """Line widths for the columns of ``lines`` (steps × lines), drawn in column order, so
+    that a line that coincides with later ones over a segment (two consecutive steps within
+    ``tol``) stays visible under them: ``base`` plus ``extra`` per later line it coincides
+    with."""
+    finite = np.isfinite(lines)
+    widths = []
+    for a in range(lines.shape[1]):
+        later = 0
+        for b in range(a + 1, lines.shape[1]):
+            with np.errstate(invalid="ignore"):
+                same = finite[:, a] & finite[:, b] & (np.abs(lines[:, a] - lines[:, b]) <= tol)
+            later += bool(np.any(same[1:] & same[:-1]))
+        widths.append(base + extra * later)
+    return widths
+
+
 def particle_ratios(ds):
     """F_T/(μF_N) at the interface with the smaller μ (1 is where the pair slips) of every
-    particle loaded at some step against the load step, dots coloured by the particle's state;
-    the slip line at 1 and the stick region below it are marked. The particles that came
-    nearest to slipping are named."""
+    particle loaded at some step against the load step, dots coloured by the particle's state.
+    The slip limit at 1 is drawn under the data, the stick region below it shaded. The
+    particles that came nearest to slipping are named (at most eight; the others are grey and
+    counted in the legend), each with its colour and rings around its dots; lines that
+    coincide are drawn thinner over thicker, so that every named particle stays visible."""
     plt = _plt()
     from matplotlib.lines import Line2D
 
@@ -723,34 +861,44 @@ def particle_ratios(ds):
     both = ds.ratio.transpose("step", "particle", "interface").values
     lower = np.isfinite(both[..., 1]) & ~(both[..., 0] > both[..., 1])
     ratio = np.where(lower, both[..., 1], both[..., 0])
-    mu = json.loads(ds.attrs.get("inputs", "{}"))
-    which = "μ_min" if mu.get("mu_up") != mu.get("mu_low") else "μ"
+    mu = _inputs(ds)
+    which = r"\mu_\mathrm{min}" if mu.get("mu_up") != mu.get("mu_low") else r"\mu"
     state = ds.state.transpose("step", "particle").values
     names = _state_names(ds)
     loaded = [i for i in range(ratio.shape[1]) if np.isfinite(ratio[:, i]).any()]
     peak = {i: float(np.nanmax(np.abs(ratio[:, i]))) for i in loaded}
-    named = sorted(loaded, key=lambda i: -peak[i])[:_CARRIERS]
+    named = sorted(loaded, key=lambda i: -peak[i])[:_NAMED]
+    others = [i for i in loaded if i not in named]
     top = max(1.2, 1.1 * max(peak.values(), default=0.0))
     fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
-    ax.axhspan(0, 1.0, color="0.9", zorder=0)
-    ax.axhline(1.0, color="tab:red", lw=1.5, label="slip: F_T = μF_N", gid="slip line")
+    ax.axhspan(0, 1.0, color="0.9", zorder=0, gid="stick region")
+    ax.axhline(1.0, color="tab:red", lw=1.0, ls="--", zorder=1,
+               label=rf"slip limit: $F_T = {which} F_N$", gid="slip line")
     palette = plt.get_cmap("Dark2").colors          # apart from the state colours
+    for i in others:
+        ax.plot(steps, ratio[:, i], lw=0.8, color="0.6", zorder=2, gid=f"particle {i}")
+    widths = _stacked_widths(ratio[:, named], 1e-3 * top)
+    for rank, i in enumerate(named):
+        colour = palette[rank % len(palette)]
+        ax.plot(steps, ratio[:, i], lw=widths[rank], color=colour, marker="o", ms=6.5,
+                mfc="none", mec=colour, mew=1.0, zorder=2, label=f"particle {i}",
+                gid=f"particle {i}")
     for i in loaded:
-        label = f"particle {i}" if i in named else "_nolegend_"
-        colour = palette[named.index(i) % len(palette)] if i in named else "0.6"
-        ax.plot(steps, ratio[:, i], lw=1.0, color=colour, label=label, gid=f"particle {i}")
         finite = np.isfinite(ratio[:, i])
         ax.scatter(steps[finite], ratio[finite, i], s=16, zorder=3, edgecolors="k",
-                   linewidths=0.4,
-                   c=[_state_colour(names[code]) for code in state[finite, i]])
+                   linewidths=0.4, c=[_state_colour(names[code]) for code in state[finite, i]])
+    handles = ax.get_legend_handles_labels()[0]
+    if others:
+        handles.append(Line2D([], [], lw=0.8, color="0.6", label=f"+ {len(others)} others"))
     shown = sorted({int(code) for i in loaded for code in state[np.isfinite(ratio[:, i]), i]})
-    handles = ax.get_legend_handles_labels()[0] + [
+    handles += [
         Line2D([], [], ls="", marker="o", ms=4, color=_state_colour(names[code]),
                markeredgecolor="k", markeredgewidth=0.4, label=names[code].replace("_", " "))
         for code in shown]
     fig.legend(handles=handles, fontsize=7, loc="outside right upper")
     ax.set_ylim(0, top)
     ax.set_xlabel("load step")
-    ax.set_ylabel(f"F_T / ({which} F_N)")
+    _integer_steps(ax.xaxis)
+    ax.set_ylabel(rf"friction ratio $F_T/({which} F_N)$")
     ax.set_title(f"{_layer_title(ds)}: {len(loaded)} loaded at some step", fontsize=9)
     return fig

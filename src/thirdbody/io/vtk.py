@@ -1,14 +1,16 @@
-"""ParaView export: the particles' surfaces at their poses, with the contact maps painted on.
+"""ParaView export: the particles at their poses, the plates, and the contact maps as patches.
 
 :func:`export_vtk` writes, into one directory, for every load step ``k`` (the ``step``
 coordinate of the results):
 
-* ``step_kkkk.vtu`` — every particle's closed triangle surface at its pose in the world
+* ``particles_kkkk.vtu`` — every particle's closed triangle surface at its pose in the world
   (unstructured grid, one triangle block, all particles concatenated in layer order);
 * ``plates_kkkk.vtu`` — the two plates as two quads (lower then upper);
-* ``layer.pvd`` — a ParaView collection listing both files of every step with
-  ``timestep`` = the step index, as ``part`` 0 (``particles``) and ``part`` 1 (``plates``):
-  open it in ParaView to get a two-block time series.
+* ``contact_kkkk.vtu`` — the contact maps of the step as patches in the plates' planes: one
+  quad per map cell, at the solver's own resolution (empty in a step without stored maps);
+* ``results.pvd`` — a ParaView collection listing the three files of every step with
+  ``timestep`` = the step index, as ``part`` 0 (``particles``), 1 (``plates``) and 2
+  (``contact``): open it in ParaView to get a three-block time series.
 
 All lengths are in metres, pressures and tractions in pascals. The files are written with
 meshio; only the small ``.pvd`` XML index is written directly.
@@ -27,16 +29,31 @@ upper plate at z = ``plate_gap``. A single-particle dataset has x0 = y0 = 0. A s
 is not finite reuses the previous step's pose (at step 0: the particle's initial orientation,
 resting on the lower plate at its initial position).
 
-The drawn surface is the undeformed shape: under load it overlaps the plates by about the
-particle's approach, as in the BEM model (rigid plates, half-space particle).
+The surface is the undeformed shape at the particle's rigid pose, as in the model (rigid
+plates, elastic half-space particle): where it is pressed, it reaches through each plate by
+that plate's ``approach``, the displacement the half-space takes up elastically. Nothing is
+clipped or flattened.
 
 The plates span the rectangle covering every particle's bounding disc over all steps, enlarged
 by the largest particle size (m) on every side; the lower quad lies at z = 0 and the upper at
 z = ``plate_gap`` of the step.
 
+Contact patches
+---------------
+For each particle, plate and stored map step, the cells of the map's window where that plate
+touches (the bounding box of the cells with pressure or a stick/slip status, one free cell
+around, within the stored window) are written as quads of the map's cell size, centred at the
+particle's centroid (x, y) plus the cell centres (``map_x``, ``map_y``), at z = 0 for the lower
+plate and z = ``plate_gap`` for the upper. Cell data (one value per map cell, as the solver has
+it): ``pressure`` (Pa), ``traction`` (3-vector, Pa, z component 0; exerted by the plate on the
+particle), ``status`` (0 open, 1 stick, 2 slip), ``particle`` (its index in the layer) and
+``plate`` (0 lower, 1 upper). Summing ``pressure`` × cell area over a patch gives the force
+that plate exerts on the particle. In a step without stored maps (see ``maps_every``) the file
+holds no cells.
+
 Data on the particle surfaces
 -----------------------------
-Point data:
+Point data, in steps with stored maps only:
 
 ``pressure`` (Pa), ``traction`` (3-vector, Pa, z component 0; exerted by the plate on the
 particle), ``status`` (0 open, 1 stick, 2 slip)
@@ -46,21 +63,19 @@ particle), ``status`` (0 open, 1 stick, 2 slip)
     (``z <= 3 h``, overlapping vertices included), the upper-interface map if it lies at most
     3 cell sizes below the upper plate (``z >= plate_gap − 3 h``; the nearer plate if both
     hold), where ``h`` is the particle's BEM cell size. Every other vertex, and a vertex
-    outside the map window, gets pressure 0, traction 0 and status 0 (open). In steps without
-    stored maps (see ``maps_every``) every vertex gets NaN pressure and traction and
-    status -1.
-``state`` (int8)
-    The particle's state code in the step, as in the results' ``state`` variable (its
-    ``flag_meanings`` attribute names the codes: stick, roll_upper, roll_lower, rotate,
-    failed, unloaded).
+    outside the map window, gets pressure 0, traction 0 and status 0 (open). A step without
+    stored maps has none of these three arrays (no NaN placeholders).
+
+The surface's vertices are far coarser than the maps (a contact spot spans a few vertices), so
+the painted pressure is an overview; the contact patches show the maps as they are.
+
+Point data in every step: ``state`` (int8), the particle's state code in the step, as in the
+results' ``state`` variable (its ``flag_meanings`` attribute names the codes: stick,
+roll_upper, roll_lower, rotate, failed, unloaded).
 
 Cell data: ``particle`` (the particle's index in the layer) and ``state`` (as above).
 
 On the plates: cell data ``plate`` (0 lower, 1 upper).
-
-The pressure is known only at the vertices, so a contact patch smaller than the facets is
-missed or shown as a single vertex: raise ``subdivisions`` (5 gives facets of about 1/30 of the
-particle size) to resolve contact patches.
 """
 
 from __future__ import annotations
@@ -79,7 +94,10 @@ from thirdbody.layer import Layer
 from thirdbody.schema import DIMENSIONS
 from thirdbody.shapes import MeshShape, Shape
 
-__all__ = ["NEAR_PLATE_CELLS", "export_vtk", "export_vtk_cli"]
+__all__ = ["COLLECTION", "NEAR_PLATE_CELLS", "export_vtk", "export_vtk_cli"]
+
+#: the name of the ParaView collection (time series) that :func:`export_vtk` writes
+COLLECTION = "results.pvd"
 
 #: a vertex samples a plate's contact map when it is at most this many cell sizes from it
 NEAR_PLATE_CELLS = 3.0
@@ -209,15 +227,20 @@ def _nearest(coords: np.ndarray, values: np.ndarray, cell: float) -> tuple[np.nd
     return np.clip(k, 0, len(coords) - 1), inside
 
 
-def _point_data(results: _Results, s: int, p: int, world: np.ndarray,
-                centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Pressure (n,), traction (n, 3) and status (n,) of particle ``p``'s vertices in step
-    index ``s`` (see the module docstring for the rules)."""
-    n = len(world)
+def _map_index(results: _Results, s: int) -> int | None:
+    """The index along ``map_step`` of the maps stored for step index ``s`` (None: none)."""
     hit = np.flatnonzero(results.map_steps == results.steps[s])
-    if len(hit) == 0:
-        return (np.full(n, np.nan), np.full((n, 3), np.nan), np.full(n, -1, dtype=np.int8))
-    m = int(hit[-1])
+    return int(hit[-1]) if len(hit) else None
+
+
+def _point_data(results: _Results, s: int, p: int, world: np.ndarray,
+                centre: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Pressure (n,), traction (n, 3) and status (n,) of particle ``p``'s vertices in step
+    index ``s`` (see the module docstring for the rules); None in a step without maps."""
+    m = _map_index(results, s)
+    if m is None:
+        return None
+    n = len(world)
     pressure, traction = np.zeros(n), np.zeros((n, 3))
     status = np.zeros(n, dtype=np.int8)
     h = results.cell_size[p]
@@ -244,6 +267,71 @@ def _point_data(results: _Results, s: int, p: int, world: np.ndarray,
         traction[rows, 1] = maps.traction[m, p, 1, j, i]
         status[rows] = maps.status[m, p, j, i]
     return pressure, traction, status
+
+
+#: the plates' codes in the ``plate`` cell data of the plates and of the contact patches
+_PLATE_CODES = {"lower": 0, "upper": 1}
+
+
+def _patch(results: _Results, m: int, p: int, interface: str, xy: np.ndarray,
+           z: float) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]] | None:
+    """One contact patch: the corner points (n, 3) and quads (k, 4) of the cells of the map
+    window where ``interface`` touches particle ``p`` at map index ``m``, one free cell around,
+    at height ``z`` around the centroid's ``xy``; with their cell data. None without contact."""
+    maps = results.maps[interface]
+    pressure = maps.pressure[m, p]
+    status = maps.status[m, p]
+    with np.errstate(invalid="ignore"):
+        touch = (pressure > 0) | (status > 0)
+    rows, cols = np.flatnonzero(touch.any(axis=1)), np.flatnonzero(touch.any(axis=0))
+    if not rows.size:
+        return None
+    ny, nx = touch.shape
+    j0, j1 = max(rows[0] - 1, 0), min(rows[-1] + 2, ny)
+    i0, i1 = max(cols[0] - 1, 0), min(cols[-1] + 2, nx)
+    h = results.cell_size[p]
+    x = xy[0] + np.append(results.map_x[p, i0:i1] - h / 2, results.map_x[p, i1 - 1] + h / 2)
+    y = xy[1] + np.append(results.map_y[p, j0:j1] - h / 2, results.map_y[p, j1 - 1] + h / 2)
+    X, Y = np.meshgrid(x, y)
+    points = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+    ni, nj = i1 - i0, j1 - j0
+    corner = (np.arange(nj)[:, None] * (ni + 1) + np.arange(ni)[None, :]).ravel()
+    quads = np.column_stack([corner, corner + 1, corner + ni + 2, corner + ni + 1])
+    if interface == "upper":            # normals into the gap, as the plates'
+        quads = quads[:, ::-1]
+    traction = maps.traction[m, p, :, j0:j1, i0:i1].reshape(2, -1).T
+    data = {"pressure": pressure[j0:j1, i0:i1].ravel().astype(float),
+            "traction": np.column_stack([traction, np.zeros(len(traction))]),
+            "status": status[j0:j1, i0:i1].ravel().astype(np.int8),
+            "particle": np.full(len(quads), p, dtype=np.int32),
+            "plate": np.full(len(quads), _PLATE_CODES[interface], dtype=np.int8)}
+    return points, quads, data
+
+
+def _contact_mesh(results: _Results, s: int, centre: np.ndarray) -> meshio.Mesh:
+    """The contact patches of every particle and plate in step index ``s`` (``centre``: the
+    particles' centroids (P, 3), m); no cells in a step without maps."""
+    points, quads = [np.zeros((0, 3))], [np.zeros((0, 4), dtype=np.int64)]
+    data: dict[str, list[np.ndarray]] = {
+        "pressure": [np.zeros(0)], "traction": [np.zeros((0, 3))],
+        "status": [np.zeros(0, dtype=np.int8)], "particle": [np.zeros(0, dtype=np.int32)],
+        "plate": [np.zeros(0, dtype=np.int8)]}
+    m = _map_index(results, s)
+    if m is not None:
+        n_points = 0
+        for p in range(len(results.cell_size)):
+            for interface, z in (("lower", 0.0), ("upper", float(results.plate_gap[s]))):
+                patch = _patch(results, m, p, interface, centre[p, :2], z)
+                if patch is None:
+                    continue
+                patch_points, patch_quads, patch_data = patch
+                points.append(patch_points)
+                quads.append(patch_quads + n_points)
+                n_points += len(patch_points)
+                for name, values in patch_data.items():
+                    data[name].append(values)
+    return meshio.Mesh(np.concatenate(points), [("quad", np.concatenate(quads))],
+                       cell_data={name: [np.concatenate(v)] for name, v in data.items()})
 
 
 def _write_pvd(path: Path, entries: list[tuple[int, int, str, str]]) -> None:
@@ -278,8 +366,8 @@ def export_vtk(ds: xr.Dataset, layer: Layer, out_dir: str | Path, *,
     Returns
     -------
     list of Path
-        The written files: per step ``step_kkkk.vtu`` then ``plates_kkkk.vtu``, then
-        ``layer.pvd``.
+        The written files: per step ``particles_kkkk.vtu``, ``plates_kkkk.vtu`` and
+        ``contact_kkkk.vtu``, then ``results.pvd``.
 
     Raises
     ------
@@ -328,32 +416,32 @@ def export_vtk(ds: xr.Dataset, layer: Layer, out_dir: str | Path, *,
     out_dir.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     entries: list[tuple[int, int, str, str]] = []
+
+    def write(mesh: meshio.Mesh, name: str, step: int, part: int, part_name: str) -> None:
+        meshio.write(out_dir / name, mesh, file_format="vtu")
+        written.append(out_dir / name)
+        entries.append((step, part, part_name, name))
+
     for s in range(n_steps):
         step = int(results.steps[s])
         points = np.empty((n_points, 3))
-        pressure = np.empty(n_points)
-        traction = np.empty((n_points, 3))
-        status = np.empty(n_points, dtype=np.int8)
-        point_state = np.empty(n_points, dtype=np.int8)
+        sampled = [] if _map_index(results, s) is not None else None
         for p, (vertices, _) in enumerate(surfaces):
-            rows = slice(offsets[p], offsets[p + 1])
             world = Rotation.from_quat(quat[s, p]).apply(vertices) + centre[s, p]
-            points[rows] = world
-            pressure[rows], traction[rows], status[rows] = _point_data(
-                results, s, p, world, centre[s, p])
-            point_state[rows] = results.state[s, p]
-        gap = float(results.plate_gap[s])
-        mesh = meshio.Mesh(
-            points, [("triangle", faces)],
-            point_data={"pressure": pressure, "traction": traction, "status": status,
-                        "state": point_state},
-            cell_data={"particle": [face_particle],
-                       "state": [results.state[s][face_particle]]})
-        name = f"step_{step:04d}.vtu"
-        meshio.write(out_dir / name, mesh, file_format="vtu")
-        written.append(out_dir / name)
-        entries.append((step, 0, "particles", name))
+            points[offsets[p]:offsets[p + 1]] = world
+            if sampled is not None:
+                sampled.append(_point_data(results, s, p, world, centre[s, p]))
+        point_data = {"state": np.repeat(results.state[s], np.diff(offsets))}
+        if sampled is not None:         # no NaN placeholders in a step without maps
+            point_data = {"pressure": np.concatenate([d[0] for d in sampled]),
+                          "traction": np.concatenate([d[1] for d in sampled]),
+                          "status": np.concatenate([d[2] for d in sampled]), **point_data}
+        particles = meshio.Mesh(points, [("triangle", faces)], point_data=point_data,
+                                cell_data={"particle": [face_particle],
+                                           "state": [results.state[s][face_particle]]})
+        write(particles, f"particles_{step:04d}.vtu", step, 0, "particles")
 
+        gap = float(results.plate_gap[s])
         corners = np.array([[x_lo, y_lo], [x_hi, y_lo], [x_hi, y_hi], [x_lo, y_hi]])
         plate_points = np.concatenate([np.column_stack([corners, np.zeros(4)]),
                                        np.column_stack([corners, np.full(4, gap)])])
@@ -361,12 +449,11 @@ def export_vtk(ds: xr.Dataset, layer: Layer, out_dir: str | Path, *,
         quads = np.array([[0, 1, 2, 3], [4, 7, 6, 5]])
         plates = meshio.Mesh(plate_points, [("quad", quads)],
                              cell_data={"plate": [np.array([0, 1], dtype=np.int8)]})
-        name = f"plates_{step:04d}.vtu"
-        meshio.write(out_dir / name, plates, file_format="vtu")
-        written.append(out_dir / name)
-        entries.append((step, 1, "plates", name))
+        write(plates, f"plates_{step:04d}.vtu", step, 1, "plates")
+        write(_contact_mesh(results, s, centre[s]), f"contact_{step:04d}.vtu", step, 2,
+              "contact")
 
-    pvd = out_dir / "layer.pvd"
+    pvd = out_dir / COLLECTION
     _write_pvd(pvd, entries)
     written.append(pvd)
     return written
@@ -425,7 +512,9 @@ def export_vtk_cli(results: Path, out: Path) -> int:
         return fail(f"{results}: {exc}")
     except OSError as exc:
         return fail(f"cannot write {out}: {exc}", code=1)
-    n_steps = (len(paths) - 1) // 2
-    print(f"wrote {n_steps} steps of {len(layer)} particle{'s' if len(layer) != 1 else ''} "
-          f"to {out} (open {out / 'layer.pvd'} in ParaView)")
+    n_steps = sum(path.name.startswith("particles_") for path in paths)
+    n_maps = int(np.isin(ds["step"].values, ds["map_step"].values).sum()) \
+        if "map_step" in ds.variables else 0
+    print(f"wrote {n_steps} steps of {len(layer)} particle{'s' if len(layer) != 1 else ''}, "
+          f"with contact patches in {n_maps}, to {out} (open {out / COLLECTION} in ParaView)")
     return 0
