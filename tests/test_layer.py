@@ -485,22 +485,31 @@ def test_the_load_sharing_converges_in_a_few_solves_per_particle(monkeypatch):
     assert len(solves) / 30 <= 4.0
 
 
-def test_two_worker_processes_give_the_same_results_as_one():
-    """Five tilted ellipsoids with low friction: several turn in the same round, in two
-    processes; the results are identical to the in-process run, bit for bit."""
+def _five_tilted(layer, workers: int = 1):
+    sim = tb.Simulation(layer, tb.Plates(0.1, 0.15), tb.LinearRamp(stop=20.0, steps=2),
+                        resolution=40, maps_every=1, workers=workers)
+    ds = quiet_run(sim)
+    assert sim.status == "complete"
+    return ds
+
+
+@pytest.fixture(scope="module")
+def five_tilted():
+    """Five tilted ellipsoids with low friction, in one process: several turn in the same
+    round."""
     layer = tb.Layer.random(box=(10e-3, 10e-3), material=SOFT, count=5, size=0.8e-3,
                             size_std=0.02e-3, distribution="normal", shape="ellipsoid",
                             orientation="tilted", max_tilt_deg=25.0, seed=5)
+    ds = _five_tilted(layer)
+    assert int(ds.turned[0].sum()) >= 2
+    return layer, ds
 
-    def run(workers):
-        sim = tb.Simulation(layer, tb.Plates(0.1, 0.15), tb.LinearRamp(stop=20.0, steps=2),
-                            resolution=40, maps_every=1, workers=workers)
-        ds = quiet_run(sim)
-        assert sim.status == "complete"
-        return ds
 
-    one, two = run(1), run(2)
-    assert int(one.turned[0].sum()) >= 2
+def test_two_worker_processes_give_the_same_results_as_one(five_tilted):
+    """The five tilted ellipsoids in two processes: the results are identical to the
+    in-process run, bit for bit."""
+    layer, one = five_tilted
+    two = _five_tilted(layer, workers=2)
     for name, var in one.data_vars.items():
         if name.startswith("time_"):
             continue
@@ -510,24 +519,11 @@ def test_two_worker_processes_give_the_same_results_as_one():
         tb.Simulation(layer, tb.Plates(0.1), tb.LinearRamp(stop=1.0, steps=1), workers=0)
 
 
-def test_several_particles_turning_in_one_round_do_not_depend_on_their_order():
-    """The five tilted ellipsoids of the worker test, in reverse order: several turn in the
-    same rounds, each against the others as they were at the round's start; identical
-    results."""
-    layer = tb.Layer.random(box=(10e-3, 10e-3), material=SOFT, count=5, size=0.8e-3,
-                            size_std=0.02e-3, distribution="normal", shape="ellipsoid",
-                            orientation="tilted", max_tilt_deg=25.0, seed=5)
-    backwards = tb.Layer(list(layer)[::-1])
-
-    def run(body):
-        sim = tb.Simulation(body, tb.Plates(0.1, 0.15), tb.LinearRamp(stop=20.0, steps=2),
-                            resolution=40, maps_every=0)
-        ds = quiet_run(sim)
-        assert sim.status == "complete"
-        return ds
-
-    a, b = run(layer), run(backwards)
-    assert int(a.turned[0].sum()) >= 2
+def test_several_particles_turning_in_one_round_do_not_depend_on_their_order(five_tilted):
+    """The five tilted ellipsoids in reverse order: several turn in the same rounds, each
+    against the others as they were at the round's start; identical results."""
+    layer, a = five_tilted
+    b = _five_tilted(tb.Layer(list(layer)[::-1]))
     back = b.isel(particle=slice(None, None, -1))
     for name, var in a.data_vars.items():
         if name.startswith(("time_", "event_")):
