@@ -82,6 +82,8 @@ __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "Conta
            "ContactReport", "solve_cluster", "wrap"]
 
 PLATES = ("lower", "upper")
+#: the broad phase looks this share of a particle's size beyond its bounding sphere
+_REACH = 0.25
 KINEMATICS = ("free", "stick", "roll", "slide")
 
 
@@ -415,7 +417,14 @@ class _Problem:
         self.start = [bodies[u] for u in order]
         self.cells = [numerics.cells(bodies)[u] for u in order]
         self.sizes = np.array([b.size for b in self.start])
-        self.radii = self.sizes.copy()
+        # the broad phase's reach: the bounding spheres grown by _REACH of the size, so that a
+        # pair about to close is known to the Newton step as an open contact (for spheres the
+        # bounding sphere is the surface: without the margin a separated pair is never seen
+        # until it overlaps), less in a periodic box too small for it (minimum image)
+        grow = _REACH
+        if box is not None:
+            grow = min(grow, max(0.0, min(box) / (4.0 * float(self.sizes.max())) - 1.0))
+        self.radii = self.sizes * (1.0 + grow)
         self.mu = {"lower": mu_low, "upper": mu_up}
         self.mu_pp = mu_pp
         self.box = None if box is None else (float(box[0]), float(box[1]))
@@ -588,6 +597,21 @@ class _Problem:
                                 for new, prev in ((A, old.a), (B, old.b)))
                 closest = closest_approach(A, B, normal=guess)
                 if closest is None:
+                    d = B.centre - A.centre
+                    distance = float(np.linalg.norm(d))
+                    sigma = distance - A.size - B.size
+                    if not sigma > 0:
+                        continue
+                    # bounding spheres apart: the separation is at least their gap (exactly it
+                    # for spheres), along the line of the centres
+                    n = d / distance
+                    pair = ElasticPair.of(A.material, B.material)
+                    ma, mb = A.material, B.material
+                    potential.append(_Potential(
+                        roles, sigma, n, A.centre + (A.size + 0.5 * sigma) * n, A.centre,
+                        B.centre, pair.E_star,
+                        0.5 * min(A.shape.feature_length, B.shape.feature_length),
+                        (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles)))
                     continue
                 if not closest.separation < 0:
                     pair = ElasticPair.of(A.material, B.material)
@@ -775,6 +799,7 @@ class _Term:
     kn: float
     sigma: float
     bem: bool
+    reach: float = 0.0              # an open contact's Hertz approach at the force scale, m
 
     def motion(self, step: np.ndarray, dh: float) -> np.ndarray:
         """(du_a, dφ_a, du_b, dφ_b) of a step (the upper plate moves by dh along z)."""
@@ -817,7 +842,7 @@ def _terms(problem: _Problem, ev: _Evaluation) -> list[_Term]:
         a, b = (p.roles[0], None) if plate else p.roles
         terms.append(_Term(a, b, plate and p.roles[1] == "upper", m, base_a, base_b,
                            m.approach_row(), m.tangential_rows(), wa, wb, 0.0, k, p.sigma,
-                           False))
+                           False, delta))
     return terms
 
 
@@ -1017,7 +1042,10 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
                 active[m] = True
 
     active, laws = _statuses(terms, np.zeros((n, 6)), 0.0)
-    active = [t.bem or t.sigma <= 0 for t in terms]
+    # an open contact closer than its approach at the force scale starts active: a particle
+    # pressed towards a neighbour it does not touch yet has no other support in the model (the
+    # pass below opens it again if the step does not close it)
+    active = [t.bem or t.sigma <= t.reach for t in terms]
     keep_plate_loaded(active)
     model = _model(n, terms, active, laws)
     step, dh = _solve_model(problem, model, groups, R, plate, translate)
