@@ -1203,6 +1203,8 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
             raise TypeError("bodies must be thirdbody.network.Body objects")
     mu_up = _nonnegative(mu_up, "mu_up")
     mu_low = _nonnegative(mu_low, "mu_low")
+    if not (callable(mu_pp) or isinstance(mu_pp, Mapping)):
+        mu_pp = _nonnegative(mu_pp, "mu_pp")
     if (gap is None) == (force is None):
         raise ValueError("give exactly one of gap (m) and force (N)")
     if gap is not None:
