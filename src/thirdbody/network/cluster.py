@@ -1,4 +1,5 @@
-"""Equilibrium of a cluster of touching particles between the plates (DESIGN.md §3c, issue 25).
+"""Equilibrium of a cluster of touching particles between the plates (docs/methods/design.md
+§3c, issue 25; the method and its validation: docs/methods/network.md).
 
 Given the particles' poses at the start of a load step, their contact histories and the plates'
 load (a prescribed gap h, or a prescribed normal force F_N on the upper plate with h unknown),
@@ -44,9 +45,9 @@ model of each contact as the tangent.** One iteration:
 All particles move together in every iteration, from one consistent state: identical particles
 in identical situations stay identical. The particles are processed in a canonical order (by
 their centroids at the start of the step) and every sum over particles or contacts is an exact
-``math.fsum``, so the result does not depend on the numbering (bit for bit; see
-``notes/network.md``). A solve that does not converge raises :class:`ClusterConvergenceError`
-naming the residual; a wrong answer is never returned.
+``math.fsum``, so the result does not depend on the numbering (bit for bit; tested in
+``tests/test_network_cluster.py``). A solve that does not converge raises
+:class:`ClusterConvergenceError` naming the residual; a wrong answer is never returned.
 
 A periodic box (L_x, L_y) makes x and y periodic: contacts act across the sides between a
 particle and the nearest image of the other. Centres are not wrapped into the box here (a

@@ -1,5 +1,5 @@
 """A particle-particle contact solved by the boundary-element method in its own frame
-(DESIGN.md §3c).
+(docs/methods/design.md §3c).
 
 Two elastic bodies a and b meet at their closest points (:func:`closest_approach`). In the
 contact frame (z along the common normal n from a to b, origin at the midpoint of the closest

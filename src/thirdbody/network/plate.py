@@ -1,5 +1,5 @@
 """A plate-particle contact in displacement control: the approach comes from the particle's pose
-and the plate's height (DESIGN.md §3c, for the plates of a dense layer).
+and the plate's height (docs/methods/design.md §3c, for the plates of a dense layer).
 
 The lower plate is the plane z = 0, the upper one the plane z = h; both are rigid
 (:meth:`ElasticPair.rigid_plate`). A particle :class:`~thirdbody.network.Body` at centroid c and
