@@ -36,11 +36,15 @@ model of each contact as the tangent.** One iteration:
    a small Levenberg-Marquardt shift so that modes without any stiffness (a particle that
    touches nothing, the free translation of a particle sliding on both plates) do not move:
    the minimum-norm step.
-5. *Trust region.* Each particle's step is limited to a rotation ρ and a translation ρ times its
-   size. The trial poses are evaluated (step 1-2); the step is accepted if the sum of squared
-   scaled residuals fell, and ρ grows when the model predicted the fall well, shrinks when it
-   did not; a rejected step (or one at which a contact solve failed) halves ρ and is retried
-   from the same state.
+5. *Trust region.* The step is scaled as a whole so that no particle turns by more than 0.05 ρ
+   rad or moves by more than 0.05 ρ of its size, and no contact's normal force changes by more
+   than ρ times itself (or the force scale). The trial poses are evaluated (step 1-2); the step
+   is accepted if the sum of squared scaled residuals fell, and ρ doubles when the model
+   predicted the fall well, halves when it did not; a rejected step (or one at which a contact
+   solve failed) quarters ρ and is retried from the same state.
+6. *Two phases.* Far from equilibrium a step first moves the particles without turning them
+   (:func:`_iterate`). When that leads to a state the full iteration does not leave (its
+   residual stalls), the step is solved again from its start without that phase.
 
 All particles move together in every iteration, from one consistent state: identical particles
 in identical situations stay identical. The particles are processed in a canonical order (by
@@ -280,12 +284,14 @@ class ClusterResult:
         (some contacts slide and others stick, or all stick while it turns), "slide" (every
         contact slides: sliding or rotating about its centroid).
     iterations : int
-        BEM passes (evaluations of every contact).
+        BEM passes (evaluations of every contact), including those of a first attempt that
+        failed (:func:`solve_cluster` then tries once more without the rotation-free phase).
     bem_solves : int
         Contact solves over all passes.
     history : tuple of (float, float, float, bool)
-        Per pass: the largest scaled residual, the merit (half the sum of squared scaled
-        residuals), the trust radius (rad) and whether the pass's step was accepted.
+        Per pass of the attempt that converged: the largest scaled residual, the merit (half
+        the sum of squared scaled residuals), the trust radius (rad) and whether the pass's
+        step was accepted.
     timings : dict
         Wall time (s): "narrow" (broad and narrow phases), "contacts" (the BEM solves,
         including their ray casting), "newton" (models, assembly and linear solves).
@@ -439,6 +445,8 @@ class _Problem:
             key, roles = self._internal(hist)
             self.histories[key] = (roles, hist.solved)
         self._start: dict = {}
+        self.phase_one_used = False
+        self.failed = (0, 0)           # passes and contact solves of an attempt that failed
         self.timings = {"narrow": 0.0, "contacts": 0.0, "newton": 0.0}
 
     # keys and roles between user and internal numbering
@@ -1088,6 +1096,19 @@ _PHASE_ONE_TOL = 0.05
 _PHASE_ONE_PASSES = 12
 
 
+#: an attempt with the rotation-free phase is abandoned when the largest residual of the last
+#: _STALL passes is not below half the best before them (:func:`solve_cluster` then solves the
+#: step again without that phase)
+_STALL = 15
+
+
+def _stalled(log: list) -> bool:
+    if len(log) <= _STALL:
+        return False
+    worst = [entry[0] for entry in log]
+    return min(worst[-_STALL:]) > 0.5 * min(worst[:-_STALL])
+
+
 def _force_residual(problem: _Problem, ev: _Evaluation, scale: float) -> float:
     R, plate = _residual_vector(problem, ev)
     Rs, ps = _scaled(problem, R, plate, scale)
@@ -1234,7 +1255,19 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
     problem = _Problem(bodies, histories, mu_up, mu_low, _mu_function(mu_pp), gap, force,
                        gap_start, shift, box, numerics)
     h = gap if gap is not None else _first_gap(problem, float(gap_start))
-    return _iterate(problem, h)
+    try:
+        return _iterate(problem, h, phase_one=True)
+    except ClusterConvergenceError as first:
+        if not problem.phase_one_used:
+            raise
+        # the rotation-free first phase can leave the iteration in a basin it does not leave
+        # (a sphere pressed into the groove of two others from touching: the new contacts
+        # slide while the lower spheres cannot turn, and the full steps then roll them the
+        # wrong way); the whole step again without it
+        try:
+            return _iterate(problem, h, phase_one=False)
+        except ClusterConvergenceError:
+            raise first from None
 
 
 def _first_gap(problem: _Problem, h: float) -> float:
@@ -1251,13 +1284,15 @@ def _first_gap(problem: _Problem, h: float) -> float:
     return top - 2.0 * delta
 
 
-def _iterate(problem: _Problem, h: float) -> ClusterResult:
-    """The Newton iteration with its trust region (module docstring). A step starts with a
-    phase that holds the rotations: far from equilibrium (the first pass of a step: the plate
-    moved, new contacts carry nothing yet) the model's moments are unreliable, since the
-    geometric stiffness that decides which way a particle rolls scales with contact forces
-    that are still wrong; so the particles and the plate first move until the forces balance
-    within :data:`_PHASE_ONE_TOL` of the force scale, then everything moves."""
+def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResult:
+    """The Newton iteration with its trust region (module docstring). A step starts (if
+    ``phase_one``) with a phase that holds the rotations: far from equilibrium (the first pass
+    of a step: the plate moved, new contacts carry nothing yet) the model's moments are
+    unreliable, since the geometric stiffness that decides which way a particle rolls scales
+    with contact forces that are still wrong; so the particles and the plate first move until
+    the forces balance within :data:`_PHASE_ONE_TOL` of the force scale, then everything
+    moves. That phase can also lead astray (:func:`solve_cluster` retries without it); an
+    attempt with it is abandoned when it stalls (:func:`_stalled`)."""
     numerics = problem.numerics
     centres = np.array([b.centre for b in problem.start], dtype=float)
     rotations = [b.rotation for b in problem.start]
@@ -1266,7 +1301,9 @@ def _iterate(problem: _Problem, h: float) -> ClusterResult:
     radius = numerics.radius
     merit_scale = ev.scale if ev.scale > 0 else (problem.force or 1.0)
     R, plate = _residual_vector(problem, ev)
-    translate = _force_residual(problem, ev, ev.scale or merit_scale) > _PHASE_ONE_TOL
+    translate = phase_one and \
+        _force_residual(problem, ev, ev.scale or merit_scale) > _PHASE_ONE_TOL
+    problem.phase_one_used = translate
     phase_passes = 0
     merit = _merit(problem, R, plate, merit_scale, translate)
     log = []
@@ -1277,6 +1314,11 @@ def _iterate(problem: _Problem, h: float) -> ClusterResult:
         if done:
             log.append((worst, merit, radius, True))
             return _result(problem, ev, worst, len(log), solves, log)
+        if phase_one and problem.phase_one_used and _stalled(log):
+            problem.failed = (len(log), solves)
+            raise ClusterConvergenceError(
+                f"cluster equilibrium stalled after the rotation-free phase: largest scaled "
+                f"residual {worst:.3e} > tol {numerics.tol:.1e} after {len(log)} passes")
         if translate and (phase_passes >= _PHASE_ONE_PASSES or _force_residual(
                 problem, ev, ev.scale or merit_scale) <= _PHASE_ONE_TOL):
             translate = False
@@ -1300,6 +1342,7 @@ def _iterate(problem: _Problem, h: float) -> ClusterResult:
             log.append((worst, merit, radius, False))
             radius *= 0.25
             if radius < numerics.min_radius:
+                problem.failed = (len(log), solves)
                 raise ClusterConvergenceError(
                     f"cluster equilibrium: a contact could not be solved at the trial poses "
                     f"({exc}); residual {worst:.3e} > tol {numerics.tol:.1e}") from exc
@@ -1330,6 +1373,7 @@ def _iterate(problem: _Problem, h: float) -> ClusterResult:
         return _result(problem, ev, worst, len(log), solves, log)
     k = int(np.argmax(np.abs(_scaled(problem, *_residual_vector(problem, ev), ev.scale or 1.0
                                      )[0]).max(axis=1)))
+    problem.failed = (len(log), solves)
     raise ClusterConvergenceError(
         f"cluster equilibrium did not converge in {len(log)} passes: largest scaled residual "
         f"{worst:.3e} > tol {numerics.tol:.1e} (particle {problem.order[k]}: force "
@@ -1429,7 +1473,8 @@ def _result(problem: _Problem, ev: _Evaluation, worst: float, passes: int, solve
         gap=float(ev.h), plate_force=total(upper), lower_force=total(lower),
         contacts=tuple(reports), force_residual=forces, moment_residual=moments,
         residual=float(worst), force_scale=float(ev.scale), kinematics=tuple(kinematics),
-        iterations=passes, bem_solves=solves, history=tuple(log),
+        iterations=passes + problem.failed[0], bem_solves=solves + problem.failed[1],
+        history=tuple(log),
         timings=dict(problem.timings), tol=numerics.tol)
 
 
