@@ -12,6 +12,7 @@ computed here from formulas and geometry, never by the code under test:
   symmetric closed form N = F/2, T/N = tan(α/2);
 * one tilted ellipsoid: the single-particle :class:`thirdbody.Simulation` at the cluster's final
   orientation (sticking) and after its turn (μ below the rigid ratio);
+* the groove across the side of a periodic box, and the next step after :func:`wrap`;
 * bad input and non-convergence.
 
 Resolutions are coarse (30-60 cells per particle size: 2.6-5 cells across a contact radius) so
@@ -30,6 +31,7 @@ from thirdbody.network.cluster import (
     ClusterConvergenceError,
     ClusterNumerics,
     solve_cluster,
+    wrap,
 )
 from thirdbody.shapes import Ellipsoid, Sphere
 
@@ -220,7 +222,7 @@ def groove_statics(A, B, C, h, force):
     return np.linalg.solve(M, rhs), tangents["A"], tangents["B"]
 
 
-def check_groove(result):
+def check_groove(result, image=(0, 0), box=None):
     """The converged contact forces against the statics of the converged geometry (measured
     deviation 2.4e-5 F, the equilibrium tolerance being 1e-5 of the force scale; 1.1e-4 F from
     touching, where the spheres end 23 µm along their rolling mechanism), the symmetric
@@ -228,10 +230,13 @@ def check_groove(result):
     V = F/2 (cos α + sin α tan(α/2) = 1), and stick everywhere."""
     check_balanced(result)
     A, B, C = (b.centre for b in result.bodies)
+    if box is not None:                          # the image of A that meets C
+        A = A - np.array([image[0] * box[0], image[1] * box[1], 0.0])
     x, tA, tB = groove_statics(A, B, C, result.gap, F)
     by_key = {c.key: c for c in result.contacts}
-    assert set(by_key) == {(0, 2, (0, 0)), (1, 2, (0, 0)), (0, "lower"), (1, "lower"),
-                           (2, "upper")}
+    ac = (0, 2, image)
+    assert set(by_key) == {ac, (1, 2, (0, 0)), (0, "lower"), (1, "lower"), (2, "upper")}
+    by_key[(0, 2, (0, 0))] = by_key[ac]
     got = np.array([
         by_key[(0, 2, (0, 0))].normal_force, by_key[(0, 2, (0, 0))].tangential_force @ tA,
         by_key[(0, "lower")].force[0], by_key[(0, "lower")].force[2],
@@ -301,6 +306,31 @@ def test_groove_from_touching():
     result = solve_cluster(bodies, mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F, numerics=COARSE)
     assert result.iterations > len(result.history)          # the second attempt converged
     check_groove(result)
+
+
+def test_groove_across_the_side_of_a_periodic_box():
+    """The groove with A moved by one box length (L = 10 R): A meets C through the side (the
+    pair's key names the image), the statics are those of the groove, and after :func:`wrap`
+    the next step under the same load starts in equilibrium (one pass, no motion)."""
+    L = 10 * R
+    s = 1.2 * R
+    zc = R + math.sqrt(4 * R * R - s * s) - 8e-6
+    bodies = [sphere(L - s, R), sphere(s, R), sphere(0.0, zc)]
+    result = solve_cluster(bodies, mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F,
+                           numerics=COARSE, box=(L, L))
+    check_groove(result, image=(1, 0), box=(L, L))
+    moved, histories = wrap(result.bodies, result.histories, (L, L))
+    for b in moved:
+        assert 0 <= b.centre[0] < L and 0 <= b.centre[1] < L
+    again = solve_cluster(moved, histories, mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F,
+                          gap_start=result.gap, numerics=COARSE, box=(L, L))
+    assert again.iterations == 1
+    assert not again.translation.any() and not again.rotation.any()
+    assert set(again.histories) == set(histories)
+    for c in again.contacts:
+        assert c.normal_force == pytest.approx(
+            next(d.normal_force for d in result.contacts if d.i == c.i and d.j == c.j),
+            rel=1e-5)
 
 
 # --- e: one particle: the cluster against the single-particle Simulation ---------------------
