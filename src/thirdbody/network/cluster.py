@@ -1096,9 +1096,9 @@ _PHASE_ONE_TOL = 0.05
 _PHASE_ONE_PASSES = 12
 
 
-#: an attempt with the rotation-free phase is abandoned when the largest residual of the last
-#: _STALL passes is not below half the best before them (:func:`solve_cluster` then solves the
-#: step again without that phase)
+#: an attempt with the rotation-free phase is abandoned when, after that phase, the largest
+#: residual of the last _STALL passes is not below half the best before them
+#: (:func:`solve_cluster` then solves the step again without that phase)
 _STALL = 15
 
 
@@ -1304,7 +1304,7 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
     translate = phase_one and \
         _force_residual(problem, ev, ev.scale or merit_scale) > _PHASE_ONE_TOL
     problem.phase_one_used = translate
-    phase_passes = 0
+    phase_passes = phase_end = 0
     merit = _merit(problem, R, plate, merit_scale, translate)
     log = []
     model = None
@@ -1314,7 +1314,7 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
         if done:
             log.append((worst, merit, radius, True))
             return _result(problem, ev, worst, len(log), solves, log)
-        if phase_one and problem.phase_one_used and _stalled(log):
+        if problem.phase_one_used and not translate and _stalled(log[phase_end:]):
             problem.failed = (len(log), solves)
             raise ClusterConvergenceError(
                 f"cluster equilibrium stalled after the rotation-free phase: largest scaled "
@@ -1322,6 +1322,7 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
         if translate and (phase_passes >= _PHASE_ONE_PASSES or _force_residual(
                 problem, ev, ev.scale or merit_scale) <= _PHASE_ONE_TOL):
             translate = False
+            phase_end = len(log)
             merit = _merit(problem, R, plate, merit_scale)
             radius = numerics.radius
             model = None
