@@ -81,7 +81,7 @@ from .broad import candidate_pairs
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
 from .narrow import closest_approach
 from .plate import PlateContact, solve_plate
-from .stiffness import ContactModel
+from .stiffness import ContactModel, TangentialLaw
 
 __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
            "ContactReport", "solve_cluster", "wrap"]
@@ -1020,6 +1020,17 @@ def _statuses(terms: list[_Term], step: np.ndarray, dh: float) -> tuple[list, li
     return active, laws
 
 
+#: sliding contacts start the active-set passes of a Newton step on their stick branch
+_STICK_FIRST = True
+
+
+def _elastic(model: ContactModel) -> TangentialLaw:
+    """The stick branch of a contact's tangential law at its current force, stiffness k₀."""
+    n = model.normal
+    zero = np.zeros(3)
+    return TangentialLaw(model.k_stick * (np.eye(3) - np.outer(n, n)), zero, zero, "stick")
+
+
 def _same(laws_a: list, laws_b: list) -> bool:
     for x, y in zip(laws_a, laws_b, strict=True):
         if x.state != y.state:
@@ -1051,6 +1062,14 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
                 active[m] = True
 
     active, laws = _statuses(terms, np.zeros((n, 6)), 0.0)
+    # a sliding contact starts on its stick branch (the elastic predictor from its current
+    # force): on the slide branch it has no stiffness along its slip, so a particle whose
+    # only way out is to roll back (a sphere under a plate that moved by more than the slip
+    # distance) sees a singular model whose least-norm step never reverses the slip; the
+    # passes below put it back on the slide branch if the step goes on along the slip
+    if _STICK_FIRST:
+        laws = [_elastic(t.model) if t.model.sliding and law.state == "slide" else law
+                for t, law in zip(terms, laws, strict=True)]
     # an open contact closer than its approach at the force scale starts active: a particle
     # pressed towards a neighbour it does not touch yet has no other support in the model (the
     # pass below opens it again if the step does not close it)
