@@ -466,6 +466,26 @@ def test_turning_ellipsoid_ends_where_the_simulation_does():
                                                                   rel=1e-4)
 
 
+def test_mu_pp_as_a_table_or_a_function_is_the_number():
+    """μ_pp given per pair of materials (either order) or as a function of the two materials
+    gives the same bits as the number; a table without the pair's materials raises KeyError."""
+    bodies = [sphere(0.0, R), Body(Sphere(R), tb.Material(2e9, 0.3), centre=(0, 0, 3 * R))]
+    other = bodies[1].material
+    kwargs = {"mu_up": 0.5, "mu_low": 0.5, "force": F, "numerics": COARSE}
+    number = solve_cluster(bodies, mu_pp=0.3, **kwargs)
+    table = solve_cluster(bodies, mu_pp={(other, MAT): 0.3}, **kwargs)
+    function = solve_cluster(bodies, mu_pp=lambda a, b: 0.3 if {a, b} == {MAT, other} else 9.0,
+                             **kwargs)
+    for result in (table, function):
+        assert result.gap == number.gap
+        for a, b in zip(result.contacts, number.contacts, strict=True):
+            assert a.mu == b.mu
+            assert np.array_equal(a.force, b.force)
+    assert number.contacts[0].mu == 0.3
+    with pytest.raises(KeyError, match="mu_pp"):
+        solve_cluster(bodies, mu_pp={(MAT, MAT): 0.3}, **kwargs)
+
+
 # --- f: bad input, no convergence ------------------------------------------------------------
 @pytest.mark.parametrize(("kwargs", "match"), [
     ({"gap": 4e-3, "force": 1.0}, "gap .* force"),
