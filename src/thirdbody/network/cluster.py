@@ -11,9 +11,11 @@ model of each contact as the tangent.** One iteration:
 
 1. *Contacts at the current poses.* Plates: every particle that reaches a plate
    (:func:`~thirdbody.network.plate.solve_plate`, approach from the pose). Pairs: the broad
-   phase (:func:`~thirdbody.network.candidate_pairs`, periodic in x and y if a box is given),
-   the narrow phase (:func:`~thirdbody.network.closest_approach`); pairs that overlap are
-   solved in approach control (:func:`~thirdbody.network.solve_contact`). The tangential problem
+   phase (:func:`~thirdbody.network.candidate_pairs` over the bounding spheres grown by a
+   quarter of the size, periodic in x and y if a box is given), the narrow phase
+   (:func:`~thirdbody.network.closest_approach`); pairs that overlap are solved in approach
+   control (:func:`~thirdbody.network.solve_contact`), the others are open contacts with their
+   separation (that of the bounding spheres when these are apart). The tangential problem
    of each contact is one increment from its history at the start of the step (or from zero
    for a new contact) under the shift increment of the bodies' rigid motion since then
    (midpoint rule, :mod:`~thirdbody.network.plate`); a contact that closed during the step sees
@@ -31,7 +33,12 @@ model of each contact as the tangent.** One iteration:
    along the slip of a sliding contact, Lubkin's torsion, and the rigid geometry (contact points
    migrating over the curved surfaces, normals turning). Rolling modes have no contact
    stiffness: the geometry alone drives them, as the one-particle turn is driven by the moment
-   its pressure centroids leave. The linear system is solved per connected component of the
+   its pressure centroids leave. Open contacts act as springs once the step closes them (one
+   closer than its Hertz approach at the force scale starts closed). Each contact's branch
+   (stick or slide, open or closed) follows the predicted motion, in passes until it settles;
+   a sliding contact starts on its stick branch, from which the step can reverse its slip
+   (on the slide branch it has no stiffness along the slip, and a particle that must roll back
+   would see a singular model). The linear system is solved per connected component of the
    particle-particle contacts (the plate gap, under force control, by a Schur complement), with
    a small Levenberg-Marquardt shift so that modes without any stiffness (a particle that
    touches nothing, the free translation of a particle sliding on both plates) do not move:
@@ -1279,10 +1286,10 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
     except ClusterConvergenceError as first:
         if not problem.phase_one_used:
             raise
-        # the rotation-free first phase can leave the iteration in a basin it does not leave
-        # (a sphere pressed into the groove of two others from touching: the new contacts
-        # slide while the lower spheres cannot turn, and the full steps then roll them the
-        # wrong way); the whole step again without it
+        # the rotation-free first phase can leave the iteration in a state it does not leave
+        # (before sliding contacts started the Newton step on their stick branch: a sphere
+        # pressed into the groove of two others from touching, whose new contacts slid while
+        # the lower spheres could not turn); the whole step again without it
         try:
             return _iterate(problem, h, phase_one=False)
         except ClusterConvergenceError:
