@@ -1,4 +1,4 @@
-"""Dense layers: particles touching particles (DESIGN.md §3c).
+"""Dense layers: particles touching particles (docs/methods/design.md §3c).
 
 The building block is one particle-particle contact resolved by the boundary-element method in
 its own frame:

@@ -1,8 +1,8 @@
 """A rigid body's pose in a network of touching particles: shape, material, rotation, centre.
 
-Conventions (DESIGN.md §2, §3c): x, y horizontal, z up, SI units. A body-frame point ``p`` sits
-in the world at ``centre + rotation.apply(p)``; the body frame has the shape's volume centroid at
-its origin, so ``centre`` is the world position of the centroid.
+Conventions (docs/methods/design.md §2, §3c): x, y horizontal, z up, SI units. A body-frame
+point ``p`` sits in the world at ``centre + rotation.apply(p)``; the body frame has the shape's
+volume centroid at its origin, so ``centre`` is the world position of the centroid.
 """
 
 from __future__ import annotations

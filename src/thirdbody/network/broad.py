@@ -1,4 +1,5 @@
-"""Broad phase: the pairs of bodies whose bounding spheres overlap (DESIGN.md §3c).
+"""Broad phase: the pairs of bodies whose bounding spheres overlap (docs/methods/design.md
+§3c).
 
 Each body is enclosed in the sphere of radius ``shape.size`` about its centroid (the largest
 centroid-surface distance), so two bodies can only touch when their centres are at most

@@ -1,5 +1,5 @@
 """A particle-particle contact solved by the boundary-element method in its own frame
-(DESIGN.md §3c).
+(docs/methods/design.md §3c).
 
 Two elastic bodies a and b meet at their closest points (:func:`closest_approach`). In the
 contact frame (z along the common normal n from a to b, origin at the midpoint of the closest
@@ -150,6 +150,16 @@ class PairContact:
         contact_radius / curvature_radius.
     shift : (2,) array
         Accumulated rigid tangential displacement of b relative to a, frame components, m.
+    shift_increment : (3,) array
+        The step's increment of the shift, world, m (zero without a tangential problem).
+    slip : (3,) array
+        Mean slip increment of b over a in the step over the slipping cells, world, m (zero
+        when no cell slips).
+    twist_moment : float
+        Moment about the normal through the pressure centroid of the tractions on a, N m.
+    curvature_a, curvature_b : (2, 2) arrays
+        Curvature tensors (1/m, > 0 convex) of a's and b's surfaces at the closest points on the
+        frame's tangent axes (a's upper surface is −½ ξᵀK_aξ, b's lower one ½ ξᵀK_bξ).
     twist : float
         Accumulated rotation of b relative to a about the normal, rad (counter-clockwise seen
         from b), from the bodies' spins between solves.
@@ -190,6 +200,11 @@ class PairContact:
     curvature_radius: float
     half_space_ratio: float
     shift: np.ndarray
+    shift_increment: np.ndarray
+    slip: np.ndarray
+    twist_moment: float
+    curvature_a: np.ndarray
+    curvature_b: np.ndarray
     twist: float
     mu: float
     normal_solution: NormalContact = field(repr=False)
@@ -292,7 +307,8 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
                   approach: float | None = None, tangential_force=None, shift_increment=None,
                   previous: PairContact | None = None, spacing: float | None = None,
                   cells_per_radius: float = 16.0, tol: float = 1e-8,
-                  half_space_limit: float = HALF_SPACE_LIMIT) -> PairContact | None:
+                  half_space_limit: float = HALF_SPACE_LIMIT, closest: Approach | None = None,
+                  warm: PairContact | None = None) -> PairContact | None:
     """Solve the contact of bodies a and b (module docstring).
 
     Parameters
@@ -329,6 +345,11 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
         Tolerance of the normal and tangential solvers.
     half_space_limit : float
         a/R beyond which a :class:`HalfSpaceWarning` is emitted.
+    closest : Approach, optional
+        The narrow phase's result for these poses (:func:`closest_approach`), if known.
+    warm : PairContact, optional
+        A recent solve of this contact (same roles) whose pressure starts the normal solve
+        instead of ``previous``'s.
 
     Returns
     -------
@@ -379,12 +400,15 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
     tol = _positive(tol, "tol", "")
     half_space_limit = _positive(half_space_limit, "half_space_limit", "")
 
-    guess = None
-    if previous is not None:
-        # the last normal, turned with the bodies
-        guess = sum((new.rotation * old.rotation.inv()).apply(previous.normal)
-                    for new, old in ((a, previous.a), (b, previous.b)))
-    closest = closest_approach(a, b, normal=guess)
+    if warm is not None and (warm.a.shape is not a.shape or warm.b.shape is not b.shape):
+        raise ValueError("warm was solved for other shapes (or a and b exchanged)")
+    if closest is None:
+        guess = None
+        if previous is not None:
+            # the last normal, turned with the bodies
+            guess = sum((new.rotation * old.rotation.inv()).apply(previous.normal)
+                        for new, old in ((a, previous.a), (b, previous.b)))
+        closest = closest_approach(a, b, normal=guess)
     if closest is None:
         return None
     delta = None
@@ -403,10 +427,12 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
 
     lattice = Lattice(a, b, frame, origin, closest.separation, spacing)
     carry = None if previous is None else _Carry.of(previous, a, b, frame, spacing)
+    seed = None if carry is None else carry.pressure
+    if warm is not None and warm.grid.dx == spacing:
+        seed = _Carry.of(warm, a, b, frame, spacing).pressure
     faceted = _smoothing(a) > 0 or _smoothing(b) > 0
     normal = _solve_normal(lattice, pair, normal_force, delta, bound, tol,
-                           None if carry is None else carry.support,
-                           None if carry is None else carry.pressure,
+                           None if carry is None else carry.support, seed,
                            faceted=faceted, from_poses=normal_force is None and approach is None)
     grid = normal.grid
     _check_extent(normal, a, b)
@@ -424,8 +450,11 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
             load = {"shift": prev_shift + (np.zeros(2) if carry is None else carry.shift)}
         tangential = solve_tangential(normal, mu, previous=prev_step, tol=tol, twist=twist,
                                       twist_centre=(0.0, 0.0), **load)
+        increment = np.asarray(tangential.shift, dtype=float) - prev_shift
+    else:
+        increment = np.zeros(2)
     return _result(a, b, closest, lattice.zero, frame, origin, n, normal, tangential, Ha, Hb,
-                   mu, twist, half_space_limit)
+                   mu, twist, half_space_limit, increment)
 
 
 @dataclass(frozen=True, eq=False)
@@ -587,7 +616,7 @@ def _fsum(values: np.ndarray) -> np.ndarray:
 
 
 def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha, Hb, mu, twist,
-            limit) -> PairContact:
+            limit, increment) -> PairContact:
     grid = normal.grid
     dA = grid.cell_area
     p = normal.pressure
@@ -616,6 +645,11 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
             f"model of the contact is out of its range (a = {radius:.3g} m, R = "
             f"{curvature:.3g} m)"), stacklevel=3)
     stick = np.zeros(grid.shape, dtype=bool) if tangential is None else tangential.stick
+    slip = np.zeros(3)
+    if tangential is not None and tangential.slip.any():
+        inc = tangential.slip_increment[:, tangential.slip]
+        slip = (math.fsum(inc[0]) * t1 + math.fsum(inc[1]) * t2) / inc.shape[1]
+    twist_moment = math.fsum((((X - xc) * tau[1] - (Y - yc) * tau[0]) * dA).ravel())
     methods = normal.methods + (() if tangential is None else tangential.methods) + \
         ("johnson1985_pair",)
     return PairContact(
@@ -630,5 +664,7 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
         radii_a=radii_a, radii_b=radii_b, curvature_radius=curvature,
         half_space_ratio=ratio,
         shift=np.zeros(2) if tangential is None else np.asarray(tangential.shift, dtype=float),
-        twist=twist, mu=mu, normal_solution=normal, tangential_solution=tangential, closest=closest,
+        shift_increment=increment[0] * t1 + increment[1] * t2, slip=slip,
+        twist_moment=twist_moment, curvature_a=-Ha, curvature_b=Hb, twist=twist, mu=mu,
+        normal_solution=normal, tangential_solution=tangential, closest=closest,
         methods=tuple(dict.fromkeys(methods)))

@@ -1,8 +1,8 @@
 """The contact frame of two bodies, and their surfaces seen from it along vertical rays.
 
-A particle-particle contact is solved in its own frame (DESIGN.md §3c): the rotation ``F``
-takes the common normal n (from body a to body b) to +z, and the origin is a world point o near
-the contact (the midpoint of the closest points). A world point x has frame coordinates
+A particle-particle contact is solved in its own frame (docs/methods/design.md §3c): the
+rotation ``F`` takes the common normal n (from body a to body b) to +z, and the origin is a world
+point o near the contact (the midpoint of the closest points). A world point x has frame coordinates
 ``F (x − o)``; in that frame body a lies below, body b above, and the gap along a vertical ray
 is the lowest height of b minus the highest height of a, both from :meth:`Shape.surfaces`.
 

@@ -63,22 +63,32 @@ class Lattice:
     def __init__(self, a, b, frame, origin, zero: float, spacing: float) -> None:
         self.a, self.b, self.frame = a, b, frame
         self.origin = np.asarray(origin, dtype=float)
+        box = footprint_box(a, b, frame, self.origin)
+        if box is None:
+            raise ValueError("the bodies' footprints do not overlap in the contact frame")
+        self._setup(zero, spacing, min(a.size, b.size),
+                    min(a.shape.feature_length, b.shape.feature_length), box)
+
+    def _setup(self, zero: float, spacing: float, size: float, feature: float,
+               box: tuple[float, float, float, float]) -> None:
+        """The scan's stride from the smaller body's ``size`` and ``feature`` length (m) and the
+        footprint ``box`` (x0, x1, y0, y1), m, in lattice coordinates."""
         self.zero, self.spacing = float(zero), float(spacing)
         # evaluated cells: sorted keys (i << 32) + (j mod 2³²) and their gaps
         self._keys = np.zeros(0, dtype=np.int64)
         self._values = np.zeros(0)
         self.rays = 0
-        size = min(a.size, b.size)
-        feature = min(a.shape.feature_length, b.shape.feature_length)
         target = min(2.0 * size / SCAN_SAMPLES, feature / 4.0)
         self.stride = 1 << max(0, math.floor(math.log2(max(target / self.spacing, 1.0))))
-        box = footprint_box(a, b, frame, self.origin)
-        if box is None:
-            raise ValueError("the bodies' footprints do not overlap in the contact frame")
         x0, x1, y0, y1 = (v / self.spacing for v in box)
         k = self.stride
         self.footprint = (k * math.floor(x0 / k), k * math.ceil(x1 / k),
                           k * math.floor(y0 / k), k * math.ceil(y1 / k))
+
+    def _rays(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The raw gap (m, before the zero level is taken off) at lattice coordinates x, y (m);
+        +inf where a ray misses."""
+        return gap_in_frame(self.a, self.b, self.frame, self.origin, x, y)
 
     def gap(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """g₀ (m) at cells (i, j) (integer arrays of one shape); +inf where a ray misses."""
@@ -94,8 +104,7 @@ class Lattice:
             todo_keys, first = np.unique(keys[~known], return_index=True)
             ti = i.ravel()[~known][first]
             tj = j.ravel()[~known][first]
-            values = gap_in_frame(self.a, self.b, self.frame, self.origin,
-                                  ti * self.spacing, tj * self.spacing) - self.zero
+            values = self._rays(ti * self.spacing, tj * self.spacing) - self.zero
             self.rays += todo_keys.size
             merged = np.concatenate([self._keys, todo_keys])
             order = np.argsort(merged, kind="stable")

@@ -1,0 +1,1558 @@
+"""Equilibrium of a cluster of touching particles between the plates (docs/methods/design.md
+§3c, issue 25; the method and its validation: docs/methods/network.md).
+
+Given the particles' poses at the start of a load step, their contact histories and the plates'
+load (a prescribed gap h, or a prescribed normal force F_N on the upper plate with h unknown),
+:func:`solve_cluster` finds every particle's pose (centroid and rotation) at which the
+resolved tractions of its contacts balance in force and moment.
+
+**Method: an implicit Newton iteration over all poses, with the BEM as the residual and a
+model of each contact as the tangent.** One iteration:
+
+1. *Contacts at the current poses.* Plates: every particle that reaches a plate
+   (:func:`~thirdbody.network.plate.solve_plate`, approach from the pose). Pairs: the broad
+   phase (:func:`~thirdbody.network.candidate_pairs` over the bounding spheres grown by a
+   quarter of the size, periodic in x and y if a box is given), the narrow phase
+   (:func:`~thirdbody.network.closest_approach`); pairs that overlap are solved in approach
+   control (:func:`~thirdbody.network.solve_contact`), the others are open contacts with their
+   separation (that of the bounding spheres when these are apart). The tangential problem
+   of each contact is one increment from its history at the start of the step (or from zero
+   for a new contact) under the shift increment of the bodies' rigid motion since then
+   (midpoint rule, :mod:`~thirdbody.network.plate`); a contact that closed during the step sees
+   the share of the motion after it closed, −σ/(σ₀ − σ) by linear interpolation of its
+   separation (σ₀ > 0 at the start, σ < 0 now).
+2. *Residuals from the resolved tractions*: each particle's force and moment about its
+   centroid, summed over its contacts from the cell fields (``math.fsum``), and under force
+   control Σ N_upper − F_N.
+3. *Converged* when every particle's force residual is below ``tol`` times the force scale
+   (the mean normal force of the cluster's contacts), its moment residual below ``tol`` times
+   the force scale times its size, and the plate force within ``tol`` F_N. Then the result is
+   returned; otherwise:
+4. *Newton step* on the tangent of :class:`~thirdbody.network.stiffness.ContactModel`: normal
+   stiffness 3N/(2δ), Mindlin's partial-slip tangential stiffness reduced by the stick zone, μN
+   along the slip of a sliding contact, Lubkin's torsion, and the rigid geometry (contact points
+   migrating over the curved surfaces, normals turning). Rolling modes have no contact
+   stiffness: the geometry alone drives them, as the one-particle turn is driven by the moment
+   its pressure centroids leave. Open contacts act as springs once the step closes them (one
+   closer than its Hertz approach at the force scale starts closed). Each contact's branch
+   (stick or slide, open or closed) follows the predicted motion, in passes until it settles;
+   a sliding contact starts on its stick branch, from which the step can reverse its slip
+   (on the slide branch it has no stiffness along the slip, and a particle that must roll back
+   would see a singular model). The linear system is solved per connected component of the
+   particle-particle contacts (the plate gap, under force control, by a Schur complement), with
+   a small Levenberg-Marquardt shift so that modes without any stiffness (a particle that
+   touches nothing, the free translation of a particle sliding on both plates) do not move:
+   the minimum-norm step.
+5. *Trust region.* The step is scaled as a whole so that no particle turns by more than 0.05 ρ
+   rad or moves by more than 0.05 ρ of its size, and no contact's normal force changes by more
+   than ρ times itself (or the force scale). The trial poses are evaluated (step 1-2); the step
+   is accepted if the sum of squared scaled residuals fell, and ρ doubles when the model
+   predicted the fall well, halves when it did not; a rejected step (or one at which a contact
+   solve failed) quarters ρ and is retried from the same state.
+6. *Two phases.* Far from equilibrium a step first moves the particles without turning them
+   (:func:`_iterate`). When that leads to a state the full iteration does not leave (its
+   residual stalls), the step is solved again from its start without that phase.
+
+All particles move together in every iteration, from one consistent state: identical particles
+in identical situations stay identical. The particles are processed in a canonical order (by
+their centroids at the start of the step) and every sum over particles or contacts is an exact
+``math.fsum``, so the result does not depend on the numbering (bit for bit; tested in
+``tests/test_network_cluster.py``). A solve that does not converge raises
+:class:`ClusterConvergenceError` naming the residual; a wrong answer is never returned.
+
+A periodic box (L_x, L_y) makes x and y periodic: contacts act across the sides between a
+particle and the nearest image of the other. Centres are not wrapped into the box here (a
+contact's key holds the image; :func:`wrap` moves centres into the box and renames the keys).
+
+Conventions as in :mod:`~thirdbody.network.contact` and :mod:`~thirdbody.network.plate`: SI
+units, world frame, the lower plate at z = 0 and the upper one at z = h.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from ..bem import ContactAtEdgeError, ConvergenceError, ElasticPair
+from ..material import Material
+from ..orientation import Rotation
+from .body import Body
+from .broad import candidate_pairs
+from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
+from .narrow import closest_approach
+from .plate import PlateContact, solve_plate
+from .stiffness import ContactModel, TangentialLaw
+
+__all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
+           "ContactReport", "solve_cluster", "wrap"]
+
+PLATES = ("lower", "upper")
+#: the broad phase looks this share of a particle's size beyond its bounding sphere
+_REACH = 0.25
+KINEMATICS = ("free", "stick", "roll", "slide")
+
+
+class ClusterConvergenceError(ConvergenceError):
+    """The equilibrium of a cluster was not found (the message names the residual)."""
+
+
+@dataclass(frozen=True)
+class ClusterNumerics:
+    """Numerical settings of :func:`solve_cluster`.
+
+    Attributes
+    ----------
+    cell_size : float or sequence of float, optional
+        BEM cell size Δ per particle, m (a pair uses the smaller of its two); default
+        ``size / resolution``.
+    resolution : float
+        Cells per particle size (bounding radius) when ``cell_size`` is not given.
+    tol : float
+        Equilibrium tolerance: force residuals relative to the force scale (the mean normal
+        force of the contacts), moment residuals relative to it times the particle's size, the
+        plate force relative to F_N.
+    solver_tol : float
+        Tolerance of the BEM normal and tangential solvers.
+    max_iterations : int
+        Evaluations (BEM passes) allowed.
+    radius : float
+        Initial trust radius ρ: per iteration a particle turns by at most 0.05 ρ rad and moves
+        by at most 0.05 ρ of its size, and a contact's normal force changes by at most ρ times
+        itself (or the force scale if larger).
+    min_radius : float
+        The iteration gives up when ρ falls below this.
+    stick_rotation : float
+        A particle whose contacts all have stick cells sticks if it turned by less than this in
+        the step (rad); otherwise it rolls.
+    half_space_limit : float
+        a/R of a contact beyond which a :class:`HalfSpaceWarning` is emitted (final contacts).
+    """
+
+    cell_size: float | Sequence[float] | None = None
+    resolution: float = 160.0
+    tol: float = 1e-6
+    solver_tol: float = 1e-8
+    max_iterations: int = 80
+    radius: float = 1.0
+    min_radius: float = 1e-8
+    stick_rotation: float = 1e-3
+    half_space_limit: float = HALF_SPACE_LIMIT
+
+    def __post_init__(self) -> None:
+        for name in ("resolution", "tol", "solver_tol", "radius", "min_radius",
+                     "stick_rotation", "half_space_limit"):
+            value = getattr(self, name)
+            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+                raise ValueError(f"ClusterNumerics.{name} must be a finite number > 0, got "
+                                 f"{value!r}")
+        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
+            raise ValueError(f"ClusterNumerics.max_iterations must be an integer >= 1, got "
+                             f"{self.max_iterations!r}")
+
+    def cells(self, bodies: Sequence[Body]) -> list[float]:
+        if self.cell_size is None:
+            return [b.size / self.resolution for b in bodies]
+        sizes = np.atleast_1d(np.asarray(self.cell_size, dtype=float))
+        if sizes.size == 1:
+            sizes = np.full(len(bodies), float(sizes[0]))
+        if sizes.shape != (len(bodies),) or not np.isfinite(sizes).all() or (sizes <= 0).any():
+            raise ValueError(f"ClusterNumerics.cell_size must be one size or one per particle "
+                             f"(> 0 m), got {self.cell_size!r}")
+        return [float(s) for s in sizes]
+
+
+@dataclass(frozen=True, eq=False)
+class ContactHistory:
+    """What a contact carries to the next step.
+
+    Attributes
+    ----------
+    key : tuple
+        ``(i, j, (m_x, m_y))`` for particles i < j (j's centre plus (m_x L_x, m_y L_y, 0) is the
+        image that meets i), or ``(i, "lower" | "upper")``.
+    roles : tuple
+        (index of body a, index of body b) for a pair (the solve's roles, kept while the
+        contact lives); (i, side) for a plate.
+    solved : PairContact or PlateContact
+        The contact's last converged solve (traction, shift, twist, pressure), at the poses of
+        the end of the step.
+    """
+
+    key: tuple
+    roles: tuple
+    solved: PairContact | PlateContact
+
+
+@dataclass(frozen=True, eq=False)
+class ContactReport:
+    """One contact of a converged cluster, seen from particle ``i`` (SI, world frame).
+
+    Attributes
+    ----------
+    key : tuple
+        As :attr:`ContactHistory.key`.
+    i : int
+        The particle (for a pair: the smaller index).
+    j : int or str
+        The other particle, or "lower"/"upper".
+    normal : (3,) array
+        Unit normal from i to j (or the plate).
+    force : (3,) array
+        Force on i, N (on j: exactly −force).
+    normal_force : float
+        N >= 0.
+    tangential_force : (3,) array
+        Tangential part of ``force``, N.
+    point : (3,) array
+        Pressure centroid, m.
+    moment_i, moment_j : (3,) arrays
+        Moments of the contact's tractions about i's and j's centroid (j's image), N m
+        (``moment_j`` zero for a plate).
+    approach : float
+        Approach from first touch, m.
+    area, stick_area : float
+        m².
+    spots : int
+    slip : (3,) array
+        Mean slip increment of j over i in the step over the slipping cells, m (zero if none).
+    shift_increment : (3,) array
+        The step's rigid tangential displacement of j relative to i at the contact, m.
+    sliding : bool
+        No stick cell: the contact slides (a frictionless contact always does).
+    state : {"stick", "slide"}
+    half_space_ratio : float
+        Contact radius over the smallest radius of curvature.
+    mu : float
+    """
+
+    key: tuple
+    i: int
+    j: int | str
+    normal: np.ndarray
+    force: np.ndarray
+    normal_force: float
+    tangential_force: np.ndarray
+    point: np.ndarray
+    moment_i: np.ndarray
+    moment_j: np.ndarray
+    approach: float
+    area: float
+    stick_area: float
+    spots: int
+    slip: np.ndarray
+    shift_increment: np.ndarray
+    sliding: bool
+    state: str
+    half_space_ratio: float
+    mu: float
+
+
+@dataclass(frozen=True, eq=False)
+class ClusterResult:
+    """The equilibrium of a cluster at the end of a step (plain data, picklable).
+
+    Attributes
+    ----------
+    bodies : tuple of Body
+        The particles at their new poses, in the input order.
+    translation : (n, 3) array
+        Each centroid's displacement in the step, m.
+    rotation : (n, 3) array
+        Each particle's rotation vector of the step (R_new R_oldᵀ), rad.
+    histories : dict
+        The contact histories to carry to the next step (:class:`ContactHistory` by key);
+        contacts that opened are dropped.
+    gap : float
+        Plate gap h, m.
+    plate_force : (3,) array
+        Total force of the upper plate on the particles, N (its z component is −F_N).
+    lower_force : (3,) array
+        Total force of the lower plate on the particles, N.
+    contacts : tuple of ContactReport
+        Every contact, sorted by key.
+    force_residual, moment_residual : (n, 3) arrays
+        Each particle's resultant force (N) and moment about its centroid (N m) from the
+        resolved tractions.
+    residual : float
+        The largest scaled residual (forces / force_scale, moments / (force_scale size), the
+        plate force / F_N).
+    force_scale : float
+        The mean normal force of the contacts, N.
+    kinematics : tuple of str
+        Per particle: "free" (touches nothing: left where it was, zero force), "stick" (every
+        contact has stick cells and the particle turned less than ``stick_rotation``), "roll"
+        (some contacts slide and others stick, or all stick while it turns), "slide" (every
+        contact slides: sliding or rotating about its centroid).
+    iterations : int
+        BEM passes (evaluations of every contact), including those of a first attempt that
+        failed (:func:`solve_cluster` then tries once more without the rotation-free phase).
+    bem_solves : int
+        Contact solves over all passes.
+    history : tuple of (float, float, float, bool)
+        Per pass of the attempt that converged: the largest scaled residual, the merit (half
+        the sum of squared scaled residuals), the trust radius (rad) and whether the pass's
+        step was accepted.
+    timings : dict
+        Wall time (s): "narrow" (broad and narrow phases), "contacts" (the BEM solves,
+        including their ray casting), "newton" (models, assembly and linear solves).
+    tol : float
+    """
+
+    bodies: tuple
+    translation: np.ndarray
+    rotation: np.ndarray
+    histories: dict
+    gap: float
+    plate_force: np.ndarray
+    lower_force: np.ndarray
+    contacts: tuple
+    force_residual: np.ndarray
+    moment_residual: np.ndarray
+    residual: float
+    force_scale: float
+    kinematics: tuple
+    iterations: int
+    bem_solves: int
+    history: tuple
+    timings: dict = field(default_factory=dict)
+    tol: float = 0.0
+
+    @property
+    def normal_force(self) -> float:
+        """F_N, the upper plate's normal force on the particles, N."""
+        return float(-self.plate_force[2])
+
+    @property
+    def free(self) -> tuple[bool, ...]:
+        return tuple(k == "free" for k in self.kinematics)
+
+    def contacts_of(self, i: int) -> list[ContactReport]:
+        """The contacts of particle i."""
+        return [c for c in self.contacts if c.i == i or c.j == i]
+
+
+# --- inputs --------------------------------------------------------------------------------
+def _mu_function(mu_pp) -> Callable[[Material, Material], float]:
+    if callable(mu_pp):
+        return mu_pp
+    if isinstance(mu_pp, Mapping):
+        table = dict(mu_pp)
+
+        def lookup(a: Material, b: Material) -> float:
+            for k in ((a, b), (b, a)):
+                if k in table:
+                    return float(table[k])
+            raise KeyError(f"mu_pp has no entry for the materials {a!r} and {b!r}")
+        return lookup
+    value = float(mu_pp)
+    return lambda a, b: value
+
+
+def _nonnegative(value, name: str) -> float:
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        x = math.nan
+    if not (math.isfinite(x) and x >= 0):
+        raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+    return x
+
+
+def _image(shift: np.ndarray, box) -> tuple[int, int]:
+    if box is None:
+        return (0, 0)
+    return (round(float(shift[0]) / box[0]), round(float(shift[1]) / box[1]))
+
+
+def _shift(image: tuple[int, int], box) -> np.ndarray:
+    if box is None:
+        return np.zeros(3)
+    return np.array([image[0] * box[0], image[1] * box[1], 0.0])
+
+
+# --- one evaluation of every contact ---------------------------------------------------------
+@dataclass
+class _Solved:
+    key: tuple                      # internal key
+    roles: tuple                    # internal (a, b) or (k, side)
+    contact: PairContact | PlateContact
+    model: ContactModel
+
+
+@dataclass
+class _Potential:
+    """An open contact a step may close: plate or pair, its separation σ >= 0 (m), where and
+    along which normal it would touch, and the contact modulus and a radius of curvature for
+    its predicted stiffness."""
+
+    roles: tuple
+    sigma: float
+    normal: np.ndarray
+    point: np.ndarray
+    centre_a: np.ndarray
+    centre_b: np.ndarray
+    E_star: float
+    radius: float
+    compliance: float               # Σ (2 − ν_i)/G_i, 1/Pa
+    mu: float
+
+
+@dataclass
+class _Evaluation:
+    centres: np.ndarray
+    rotations: list
+    h: float
+    contacts: list
+    potential: list
+    forces: np.ndarray
+    moments: np.ndarray
+    plate_normal: float             # Σ N over the upper plate's contacts
+    scale: float                    # mean normal force of the contacts (or 0)
+    solves: int
+
+
+class _Problem:
+    """Everything fixed during one step (internal, canonical order)."""
+
+    def __init__(self, bodies, histories, mu_up, mu_low, mu_pp, gap, force, gap_start,
+                 plate_shift, box, numerics) -> None:
+        self.numerics = numerics
+        self.n = len(bodies)
+        order = sorted(range(self.n), key=lambda i: tuple(float(v) for v in bodies[i].centre))
+        self.order = order                            # internal k -> user index
+        self.user_to_internal = {u: k for k, u in enumerate(order)}
+        self.start = [bodies[u] for u in order]
+        self.cells = [numerics.cells(bodies)[u] for u in order]
+        self.sizes = np.array([b.size for b in self.start])
+        # the broad phase's reach: the bounding spheres grown by _REACH of the size, so that a
+        # pair about to close is known to the Newton step as an open contact (for spheres the
+        # bounding sphere is the surface: without the margin a separated pair is never seen
+        # until it overlaps), less in a periodic box too small for it (minimum image)
+        grow = _REACH
+        if box is not None:
+            grow = min(grow, max(0.0, min(box) / (4.0 * float(self.sizes.max())) - 1.0))
+        self.radii = self.sizes * (1.0 + grow)
+        self.mu = {"lower": mu_low, "upper": mu_up}
+        self.mu_pp = mu_pp
+        self.box = None if box is None else (float(box[0]), float(box[1]))
+        self.force = force
+        self.gap = gap
+        self.gap_start = gap_start
+        self.plate_shift = np.zeros(3)
+        self.plate_shift[:2] = plate_shift
+        self.histories = {}
+        for hist in histories.values():
+            key, roles = self._internal(hist)
+            self.histories[key] = (roles, hist.solved)
+        self._start: dict = {}
+        self.phase_one_used = False
+        self.failed = (0, 0)           # passes and contact solves of an attempt that failed
+        self.timings = {"narrow": 0.0, "contacts": 0.0, "newton": 0.0}
+
+    # keys and roles between user and internal numbering
+    def _internal(self, hist: ContactHistory):
+        key = hist.key
+        u2k = self.user_to_internal
+        if len(key) == 2:
+            if key[0] not in u2k or key[1] not in PLATES:
+                raise ValueError(f"history key {key!r} names no particle of this cluster")
+            return (u2k[key[0]], key[1]), (u2k[key[0]], key[1])
+        i, j, image = key
+        if i not in u2k or j not in u2k:
+            raise ValueError(f"history key {key!r} names no particle of this cluster")
+        ki, kj = u2k[i], u2k[j]
+        image = (int(image[0]), int(image[1]))
+        if ki > kj:
+            ki, kj, image = kj, ki, (-image[0], -image[1])
+        roles = (u2k[hist.roles[0]], u2k[hist.roles[1]])
+        return (ki, kj, image), roles
+
+    def user_key(self, key: tuple) -> tuple:
+        if len(key) == 2:
+            return (self.order[key[0]], key[1])
+        k, m, image = key
+        i, j = self.order[k], self.order[m]
+        if i > j:
+            return (j, i, (-image[0], -image[1]))
+        return (i, j, image)
+
+    def body(self, k: int, centres, rotations) -> Body:
+        b = self.start[k]
+        return Body(b.shape, b.material, rotations[k], centres[k])
+
+    def pair_bodies(self, key, roles, centres, rotations):
+        """Bodies a and b of a pair (b at the image that meets a)."""
+        _, second, image = key
+        shift = _shift(image, self.box)          # added to the second's centre
+        a, b = roles
+        A = self.body(a, centres, rotations)
+        B = self.body(b, centres, rotations)
+        if b == second:
+            B = B.moved(centre=B.centre + shift)
+        else:
+            B = B.moved(centre=B.centre - shift)
+        return A, B
+
+    def start_contact(self, key, roles) -> tuple[float, np.ndarray | None]:
+        """A contact's signed separation at the start of the step (m) and where it would touch
+        then (world, m; None if unknown), for a contact without history."""
+        hit = self._start.get(key)
+        if hit is None:
+            centres = np.array([b.centre for b in self.start])
+            rotations = [b.rotation for b in self.start]
+            if len(key) == 2:
+                k, side = key
+                b = self.start[k]
+                if side == "lower":
+                    point = b.centre + b.shape.lowest_point(b.rotation)
+                    separation = float(point[2])
+                    point[2] = 0.0
+                else:
+                    point = b.centre + b.shape.highest_point(b.rotation)
+                    separation = float(self.gap_start) - float(point[2])
+                    point[2] = float(self.gap_start)
+                hit = (separation, point)
+            else:
+                A, B = self.pair_bodies(key, roles, centres, rotations)
+                closest = closest_approach(A, B)
+                hit = ((float(np.linalg.norm(B.centre - A.centre)) - A.size - B.size, None)
+                       if closest is None else (closest.separation, closest.midpoint))
+            self._start[key] = hit
+        return hit
+
+    def fraction(self, key, roles, depth: float) -> float:
+        """Share of the step's motion a contact without history saw (module docstring)."""
+        if depth <= 0:
+            return 0.0
+        before = self.start_contact(key, roles)[0]
+        if not before > 0:
+            return 1.0
+        return depth / (depth + before)
+
+    def pair_mu(self, a: int, b: int) -> float:
+        mu = self.mu_pp(self.start[a].material, self.start[b].material)
+        return _nonnegative(mu, "mu_pp")
+
+    # --- the contacts at some poses --------------------------------------------------------
+    def evaluate(self, centres, rotations, h: float, last: dict | None) -> _Evaluation:
+        numerics = self.numerics
+        last = last or {}
+        contacts: list[_Solved] = []
+        potential: list[_Potential] = []
+        solves = 0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", HalfSpaceWarning)
+            # plates
+            t0 = time.perf_counter()
+            for k in range(self.n):
+                body = self.body(k, centres, rotations)
+                for side in PLATES:
+                    key = (k, side)
+                    plate = 0.0 if side == "lower" else h
+                    previous = self.histories.get(key)
+                    previous = None if previous is None else previous[1]
+                    fraction = 1.0
+                    extreme = (body.shape.lowest_point(body.rotation) if side == "lower"
+                               else body.shape.highest_point(body.rotation))
+                    depth = (-float(body.centre[2] + extreme[2]) if side == "lower"
+                             else float(body.centre[2] + extreme[2]) - h)
+                    if depth <= 0:
+                        point = body.centre + extreme
+                        point[2] = plate
+                        mat = body.material
+                        potential.append(_Potential(
+                            key, -depth, np.array([0.0, 0.0, -1.0 if side == "lower" else 1.0]),
+                            point, body.centre, point, mat.E_star, body.shape.feature_length,
+                            (2.0 - mat.nu) / mat.G, self.mu[side]))
+                        continue
+                    lever_start = None
+                    if previous is None:
+                        fraction = self.fraction(key, key, depth)
+                        lever_start = self.start_contact(key, key)[1] - self.start[k].centre
+                    warm = last.get(key)
+                    solved = solve_plate(
+                        body, side, plate=plate, mu=self.mu[side], spacing=self.cells[k],
+                        previous=previous, start=self.start[k],
+                        plate_shift=self.plate_shift[:2] if side == "upper" else (0.0, 0.0),
+                        fraction=fraction, lever_start=lever_start, tol=numerics.solver_tol,
+                        warm=None if warm is None else warm.contact,
+                        half_space_limit=numerics.half_space_limit)
+                    solves += 1
+                    if solved is None:
+                        continue
+                    then = previous.lever if previous is not None else lever_start
+                    model = _plate_model(solved).stepping(
+                        mid_a=0.5 * (then + solved.lever), mid_b=np.zeros(3),
+                        turn_a=(body.rotation * self.start[k].rotation.inv()).as_rotvec(),
+                        turn_b=np.zeros(3), fraction=fraction)
+                    contacts.append(_Solved(key, key, solved, _secant(model, solved, warm)))
+            t1 = time.perf_counter()
+            self.timings["contacts"] += t1 - t0
+            # pairs
+            pairs = candidate_pairs(centres, self.radii, self.box) if self.n > 1 else []
+            todo = []
+            for k, m, shift in pairs:
+                key = (k, m, _image(shift, self.box))
+                hist = self.histories.get(key)
+                roles = (k, m) if hist is None else hist[0]
+                A, B = self.pair_bodies(key, roles, centres, rotations)
+                guess = None
+                warm = last.get(key)
+                if warm is not None:
+                    guess = warm.contact.normal
+                elif hist is not None:
+                    old = hist[1]
+                    guess = sum((new.rotation * prev.rotation.inv()).apply(old.normal)
+                                for new, prev in ((A, old.a), (B, old.b)))
+                closest = closest_approach(A, B, normal=guess)
+                if closest is None:
+                    d = B.centre - A.centre
+                    distance = float(np.linalg.norm(d))
+                    sigma = distance - A.size - B.size
+                    if not sigma > 0:
+                        continue
+                    # bounding spheres apart: the separation is at least their gap (exactly it
+                    # for spheres), along the line of the centres
+                    n = d / distance
+                    pair = ElasticPair.of(A.material, B.material)
+                    ma, mb = A.material, B.material
+                    potential.append(_Potential(
+                        roles, sigma, n, A.centre + (A.size + 0.5 * sigma) * n, A.centre,
+                        B.centre, pair.E_star,
+                        0.5 * min(A.shape.feature_length, B.shape.feature_length),
+                        (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles)))
+                    continue
+                if not closest.separation < 0:
+                    pair = ElasticPair.of(A.material, B.material)
+                    ma, mb = A.material, B.material
+                    potential.append(_Potential(
+                        roles, closest.separation, closest.normal, closest.midpoint, A.centre,
+                        B.centre, pair.E_star,
+                        0.5 * min(A.shape.feature_length, B.shape.feature_length),
+                        (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles)))
+                    continue
+                todo.append((key, roles, hist, A, B, closest, warm))
+            t2 = time.perf_counter()
+            self.timings["narrow"] += t2 - t1
+            for key, roles, hist, A, B, closest, warm in todo:
+                a, b = roles
+                mu = self.pair_mu(a, b)
+                fraction = 1.0 if hist is not None else \
+                    self.fraction(key, roles, -closest.separation)
+                kinematics = self._pair_kinematics(key, roles, A, B, closest,
+                                                   None if hist is None else hist[1])
+                shift = fraction * kinematics[0] if mu > 0 else None
+                solved = solve_contact(
+                    A, B, mu=mu, previous=None if hist is None else hist[1],
+                    spacing=min(self.cells[a], self.cells[b]), tol=numerics.solver_tol,
+                    closest=closest, warm=None if warm is None else warm.contact,
+                    shift_increment=shift, half_space_limit=numerics.half_space_limit)
+                solves += 1
+                if solved is None:
+                    continue
+                _, mid_a, mid_b, turn_a, turn_b = kinematics
+                model = _pair_model(solved, A, B, mu).stepping(
+                    mid_a=mid_a, mid_b=mid_b, turn_a=turn_a, turn_b=turn_b, fraction=fraction)
+                contacts.append(_Solved(key, roles, solved, _secant(model, solved, warm)))
+            self.timings["contacts"] += time.perf_counter() - t2
+        forces, moments = self._sums(contacts)
+        upper = [c.contact.normal_force for c in contacts if c.key[-1] == "upper"]
+        normals = [c.contact.normal_force for c in contacts]
+        scale = math.fsum(normals) / len(normals) if normals else 0.0
+        return _Evaluation(np.array(centres, dtype=float), list(rotations), h, contacts,
+                           potential, forces, moments, math.fsum(upper), scale, solves)
+
+    def _pair_kinematics(self, key, roles, A, B, closest, old):
+        """The step's rigid motion at a pair contact: (the shift increment of b relative to a,
+        world, m, by the midpoint rule; the levers at the middle of the step from a's and b's
+        centroids; a's and b's rotation vectors since the start of the step)."""
+        centres0 = np.array([b.centre for b in self.start])
+        rotations0 = [b.rotation for b in self.start]
+        A0, B0 = self.pair_bodies(key, roles, centres0, rotations0)
+        o1 = closest.midpoint
+        if old is not None:
+            o0 = old.origin
+        else:
+            o0 = self.start_contact(key, roles)[1]
+            o0 = o1 if o0 is None else o0
+        motion, mids, turns = [], [], []
+        for new, then in ((A, A0), (B, B0)):
+            dc = new.centre - then.centre
+            dphi = (new.rotation * then.rotation.inv()).as_rotvec()
+            arm = 0.5 * ((o0 - then.centre) + (o1 - new.centre))
+            motion.append(dc + np.cross(dphi, arm))
+            mids.append(arm)
+            turns.append(dphi)
+        return motion[1] - motion[0], mids[0], mids[1], turns[0], turns[1]
+
+    def _sums(self, contacts: list[_Solved]) -> tuple[np.ndarray, np.ndarray]:
+        """Each particle's force and moment about its centroid from its contacts (fsum)."""
+        terms_f: list[list[np.ndarray]] = [[] for _ in range(self.n)]
+        terms_m: list[list[np.ndarray]] = [[] for _ in range(self.n)]
+        for c in contacts:
+            s = c.contact
+            if isinstance(s, PlateContact):
+                k = c.key[0]
+                terms_f[k].append(s.force)
+                terms_m[k].append(s.moment)
+            else:
+                a, b = c.roles
+                terms_f[a].append(s.force_on_a)
+                terms_m[a].append(s.moment_a)
+                terms_f[b].append(s.force_on_b)
+                terms_m[b].append(s.moment_b)
+        forces = np.zeros((self.n, 3))
+        moments = np.zeros((self.n, 3))
+        for k in range(self.n):
+            if terms_f[k]:
+                F = np.array(terms_f[k])
+                M = np.array(terms_m[k])
+                forces[k] = [math.fsum(F[:, d]) for d in range(3)]
+                moments[k] = [math.fsum(M[:, d]) for d in range(3)]
+        return forces, moments
+
+
+def _tangential_state(c) -> tuple[np.ndarray, np.ndarray]:
+    """(tangential force, shift increment of the step), world 3-vectors, of a solved contact."""
+    if isinstance(c, PlateContact):
+        return c.tangential_force, np.append(c.shift_increment, 0.0)
+    return c.tangential_force, c.shift_increment
+
+
+def _secant(model: ContactModel, solved, warm: _Solved | None) -> ContactModel:
+    """The model with the stiffnesses measured between this solve and the last one of the same
+    contact (secants along the last step, when it was large enough to be measured; for the
+    tangential one, when both solves stuck), in place of the estimates (Hertz's 3N/(2δ), which a
+    contact a few cells across misses by tens of per cent, and Mindlin's k₀ c/a): the Newton
+    iteration then converges faster than its rate with the estimates (0.28 per pass for an
+    ellipsoid sticking between the plates with 2.6 cells across its contact radius)."""
+    if warm is None:
+        return model
+    old = warm.contact
+    d_approach = solved.approach - old.approach
+    # a step too small to be measured (the solvers' tolerance is 1e-8 of the force) keeps the
+    # last measurement: near convergence the steps shrink, and a contact a few cells across
+    # whose cells no longer change is stiffer than one whose contact grows (a punch against
+    # Hertz; 0.72 of Hertz's tangent at 2.6 cells per contact radius)
+    if abs(d_approach) > 1e-6 * max(solved.approach, old.approach) and old.normal_force > 0:
+        k = (solved.normal_force - old.normal_force) / d_approach
+        if 0.2 * model.k_normal <= k <= 5.0 * model.k_normal:
+            model = replace(model, k_normal=k)
+    elif 0.2 * model.k_normal <= warm.model.k_normal <= 5.0 * model.k_normal:
+        model = replace(model, k_normal=warm.model.k_normal)
+    if model.sliding or model.k_stick <= 0:
+        return model
+    if not old.stick.any() or not solved.stick.any():
+        return model
+    T1, s1 = _tangential_state(solved)
+    T0, s0 = _tangential_state(old)
+    ds = s1 - s0
+    length2 = float(ds @ ds)
+    scale = model.mu * model.normal_force / model.k_stick   # the slip distance scale, m
+    if length2 <= (1e-6 * scale) ** 2:
+        if not warm.model.sliding and 0.05 * model.k_stick <= warm.model.k_loading \
+                <= 1.5 * model.k_stick:
+            return replace(model, k_loading=warm.model.k_loading)
+        return model
+    k = float((T1 - T0) @ ds) / length2
+    if not 0.05 * model.k_stick <= k <= 1.5 * model.k_stick:
+        return model
+    return replace(model, k_loading=k)
+
+
+def _plate_model(c: PlateContact) -> ContactModel:
+    mat = c.body.material
+    K = np.zeros((3, 3))
+    K[:2, :2] = c.curvature
+    return replace(ContactModel.of(
+        normal=c.normal, point=c.pressure_centroid, centre_a=c.body.centre,
+        centre_b=c.pressure_centroid, normal_force=c.normal_force,
+        tangential_force=c.tangential_force, twist_moment=c.twist_moment, approach=c.approach,
+        area=c.area, stick_area=c.stick_area, mu=c.mu, slip=np.append(c.slip, 0.0),
+        compliance=(2.0 - mat.nu) / mat.G, torsion=1.0 / mat.G, curvature_a=K,
+        curvature_b=np.zeros((3, 3)), sliding=c.mu > 0 and not c.stick.any()), touch=c.touch)
+
+
+def _pair_model(c: PairContact, A: Body, B: Body, mu: float) -> ContactModel:
+    t = c.tangent_axes                       # (2, 3)
+    ma, mb = A.material, B.material
+    return replace(ContactModel.of(
+        normal=c.normal, point=c.pressure_centroid, centre_a=A.centre, centre_b=B.centre,
+        normal_force=c.normal_force, tangential_force=c.tangential_force,
+        twist_moment=c.twist_moment, approach=c.approach, area=c.area,
+        stick_area=c.stick_area, mu=mu, slip=c.slip,
+        compliance=(2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G,
+        torsion=1.0 / ma.G + 1.0 / mb.G, curvature_a=t.T @ c.curvature_a @ t,
+        curvature_b=t.T @ c.curvature_b @ t, sliding=mu > 0 and not c.stick.any()),
+        touch=c.origin)
+
+
+# --- the Newton step -----------------------------------------------------------------------
+@dataclass
+class _Term:
+    """One contact in the linear model: a solved contact (``bem``) or an open one that a step
+    may close (a spring of the stiffness it would have at the force scale, separation
+    ``sigma``)."""
+
+    a: int
+    b: int | None                   # None: a plate
+    upper: bool
+    model: ContactModel
+    base_a: np.ndarray              # (6, 12)
+    base_b: np.ndarray
+    row: np.ndarray                 # (12,) the approach's change
+    trows: np.ndarray               # (3, 12) the tangential relative displacement
+    wrench_a: np.ndarray            # (6,) of the current force, or of −k σ for a spring
+    wrench_b: np.ndarray
+    N: float
+    kn: float
+    sigma: float
+    bem: bool
+    reach: float = 0.0              # an open contact's Hertz approach at the force scale, m
+
+    def motion(self, step: np.ndarray, dh: float) -> np.ndarray:
+        """(du_a, dφ_a, du_b, dφ_b) of a step (the upper plate moves by dh along z)."""
+        out = np.zeros(12)
+        out[:6] = step[self.a]
+        if self.b is not None:
+            out[6:] = step[self.b]
+        elif self.upper:
+            out[8] = dh
+        return out
+
+
+def _terms(problem: _Problem, ev: _Evaluation) -> list[_Term]:
+    terms = []
+    scale = ev.scale if ev.scale > 0 else (problem.force or 0.0)
+    for c in ev.contacts:
+        m = c.model
+        base_a, base_b = m.base_blocks()
+        wa, wb = m.wrenches()
+        plate = isinstance(c.contact, PlateContact)
+        a, b = (c.key[0], None) if plate else c.roles
+        terms.append(_Term(a, b, plate and c.key[1] == "upper", m, base_a, base_b,
+                           m.approach_row(), m.tangential_rows(), wa, wb, m.normal_force,
+                           m.k_normal, 0.0, True))
+    if scale <= 0:
+        return terms
+    for p in ev.potential:
+        # Hertz at the force scale: δ = (9 N² / (16 E*² R))^(1/3), k = 3N/(2δ)
+        delta = (9.0 * scale**2 / (16.0 * p.E_star**2 * p.radius)) ** (1.0 / 3.0)
+        k = 1.5 * scale / delta
+        k0 = 8.0 * math.sqrt(p.radius * delta) / p.compliance if p.mu > 0 else 0.0
+        m = ContactModel.spring(normal=p.normal, point=p.point, centre_a=p.centre_a,
+                                centre_b=p.centre_b, stiffness=k, tangential=k0, mu=p.mu)
+        base_a, base_b = m.base_blocks()
+        f = k * p.sigma * m.normal                  # −N n with N = −k σ
+        ra, rb = m.arms
+        wa = np.concatenate([f, np.cross(ra, f)])
+        wb = np.concatenate([-f, -np.cross(rb, f)])
+        plate = p.roles[1] in PLATES
+        a, b = (p.roles[0], None) if plate else p.roles
+        terms.append(_Term(a, b, plate and p.roles[1] == "upper", m, base_a, base_b,
+                           m.approach_row(), m.tangential_rows(), wa, wb, 0.0, k, p.sigma,
+                           False, delta))
+    return terms
+
+
+def _components(n: int, terms: list[_Term]) -> list[list[int]]:
+    pairs = [(t.a, t.b) for t in terms if t.b is not None]
+    if not pairs:
+        return [[k] for k in range(n)]
+    rows = [a for a, _ in pairs]
+    cols = [b for _, b in pairs]
+    graph = coo_matrix((np.ones(len(pairs)), (rows, cols)), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    groups: list[list[int]] = [[] for _ in range(count)]
+    for k in range(n):
+        groups[labels[k]].append(k)
+    return groups
+
+
+_LM = 1e-9      # Levenberg-Marquardt shift, relative to the largest scaled stiffness
+_ACTIVE_SET_PASSES = 12
+
+
+@dataclass
+class _Model:
+    """The linear model of the residuals with a given set of active terms."""
+
+    blocks: dict                    # (row particle, col particle) -> (6, 6)
+    constant: np.ndarray            # (n, 6): the residual's change at a zero step
+    h_col: np.ndarray               # (n, 6)
+    h_row: np.ndarray               # (n, 6)
+    h_diag: float
+    plate_constant: float
+
+    def residual(self, R: np.ndarray, plate: float, step: np.ndarray, dh: float):
+        out = R + self.constant + self.h_col * dh
+        for (r, c), blk in self.blocks.items():
+            out[r] += blk @ step[c]
+        plate_out = plate + self.plate_constant + math.fsum((self.h_row * step).ravel()) + \
+            self.h_diag * dh
+        return out, plate_out
+
+
+def _model(n: int, terms: list[_Term], active: list[bool], laws: list) -> _Model:
+    blocks: dict = {}
+    constant = np.zeros((n, 6))
+    h_col = np.zeros((n, 6))
+    h_row = np.zeros((n, 6))
+    h_diag = 0.0
+    plate_constant = 0.0
+
+    def add(r, c, blk):
+        if (r, c) in blocks:
+            blocks[(r, c)] = blocks[(r, c)] + blk
+        else:
+            blocks[(r, c)] = blk.copy()
+
+    for t, on, law in zip(terms, active, laws, strict=True):
+        if t.bem and not on:
+            # the contact opens under the step: its force goes
+            constant[t.a] -= t.wrench_a
+            if t.b is not None:
+                constant[t.b] -= t.wrench_b
+            elif t.upper:
+                plate_constant -= t.N
+            continue
+        if not on:
+            continue
+        la, lb, ca, cb = t.model.law_blocks(law)
+        block_a, block_b = t.base_a + la, t.base_b + lb
+        constant[t.a] += ca
+        if t.b is not None:
+            constant[t.b] += cb
+        if not t.bem:
+            constant[t.a] += t.wrench_a
+            if t.b is not None:
+                constant[t.b] += t.wrench_b
+            elif t.upper:
+                plate_constant -= t.kn * t.sigma
+        add(t.a, t.a, block_a[:, :6])
+        if t.b is not None:
+            add(t.a, t.b, block_a[:, 6:])
+            add(t.b, t.a, block_b[:, :6])
+            add(t.b, t.b, block_b[:, 6:])
+        elif t.upper:
+            h_col[t.a] += block_a[:, 8]
+            h_row[t.a] += t.kn * t.row[:6]
+            h_diag += t.kn * t.row[8]
+    return _Model(blocks, constant, h_col, h_row, h_diag, plate_constant)
+
+
+def _solve_model(problem: _Problem, model: _Model, groups, R: np.ndarray, plate: float,
+                 translate: bool = False) -> tuple[np.ndarray, float]:
+    """The step (n, 6) and dh that zero the model's residuals, minimum-norm on modes without
+    stiffness; per connected component, in scaled units (rotations times size, moments over
+    size), the plate gap by a Schur complement. ``translate``: the rotations are held and the
+    moments left out (the first phase of a step, :func:`_iterate`)."""
+    n = problem.n
+    L = problem.sizes
+    # unknowns in metres (a rotation as the arc at the particle's size: dq̂ = L dφ, so
+    # dq = S dq̂ with S = 1/L), equations in newtons (a moment over the size)
+    col_scale = np.hstack([np.ones((n, 3)), np.repeat(1.0 / L[:, None], 3, 1)])
+    row_scale = np.hstack([np.ones((n, 3)), np.repeat(1.0 / L[:, None], 3, 1)])
+    force_control = problem.force is not None
+    x = np.zeros((n, 6))
+    y = np.zeros((n, 6))
+    target = R + model.constant
+    by_row: dict[int, list] = {}
+    for (r, c), blk in model.blocks.items():
+        by_row.setdefault(r, []).append((c, blk))
+    for group in groups:
+        index = {k: m for m, k in enumerate(group)}
+        size = 6 * len(group)
+        J = np.zeros((size, size))
+        for k in group:
+            for c, blk in sorted(by_row.get(k, []), key=lambda cb: cb[0]):
+                m, q = index[k], index[c]
+                J[6 * m:6 * m + 6, 6 * q:6 * q + 6] += \
+                    row_scale[k][:, None] * blk * col_scale[c][None, :]
+        rhs = np.concatenate([-target[k] * row_scale[k] for k in group])
+        hcol = np.concatenate([model.h_col[k] * row_scale[k] for k in group])
+        keep = np.arange(size)
+        if translate:
+            keep = keep[keep % 6 < 3]
+            J = J[np.ix_(keep, keep)]
+            rhs, hcol = rhs[keep], hcol[keep]
+        diag = np.abs(np.diag(J))
+        top = float(diag.max()) if diag.size else 0.0
+        J[np.diag_indices(keep.size)] += _LM * top if top > 0 else 1.0
+        xs, ys = np.zeros(size), np.zeros(size)
+        if force_control and hcol.any():
+            sol = np.linalg.solve(J, np.column_stack([rhs, hcol]))
+            xs[keep], ys[keep] = sol[:, 0], sol[:, 1]
+        else:
+            xs[keep] = np.linalg.solve(J, rhs)
+        for k in group:
+            m = index[k]
+            x[k] = xs[6 * m:6 * m + 6] * col_scale[k]
+            y[k] = ys[6 * m:6 * m + 6] * col_scale[k]
+    dh = 0.0
+    if force_control:
+        # Σ_k h_row_k · (x_k − y_k dh) + h_diag dh = −(ΣN − F + constant)
+        num = -(plate + model.plate_constant) - math.fsum((model.h_row * x).ravel())
+        den = model.h_diag - math.fsum((model.h_row * y).ravel())
+        if den != 0:
+            dh = num / den
+    return x - y * dh, dh
+
+
+def _approach_change(t: _Term, step: np.ndarray, dh: float) -> float:
+    return float(t.row @ t.motion(step, dh))
+
+
+def _statuses(terms: list[_Term], step: np.ndarray, dh: float) -> tuple[list, list]:
+    """Each term's normal status (in contact after the step) and tangential branch, from the
+    predicted motion."""
+    active, laws = [], []
+    for t in terms:
+        v = t.motion(step, dh)
+        d = float(t.row @ v)
+        if t.bem:
+            dN = t.kn * d
+            active.append(t.N + dN > 0)
+        else:
+            dN = t.kn * (d - t.sigma)
+            active.append(dN > 0)
+        laws.append(t.model.tangential_law(t.trows @ v, dN))
+    return active, laws
+
+
+#: sliding contacts start the active-set passes of a Newton step on their stick branch
+_STICK_FIRST = True
+
+
+def _elastic(model: ContactModel) -> TangentialLaw:
+    """The stick branch of a contact's tangential law at its current force, stiffness k₀."""
+    n = model.normal
+    zero = np.zeros(3)
+    return TangentialLaw(model.k_stick * (np.eye(3) - np.outer(n, n)), zero, zero, "stick")
+
+
+def _same(laws_a: list, laws_b: list) -> bool:
+    for x, y in zip(laws_a, laws_b, strict=True):
+        if x.state != y.state:
+            return False
+        if x.state == "slide" and not np.allclose(x.g, y.g, rtol=1e-6, atol=1e-12 * (
+                float(np.abs(x.g).max()) + 1e-300)):
+            return False
+    return True
+
+
+def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: float,
+                 translate: bool = False):
+    """The model's step with an active set of contacts: a solved contact whose normal force
+    the step would take below zero opens (its force goes, it has no stiffness), an open one
+    that the step would close acts with its spring, and each contact's tangential law takes the
+    branch (stick, or slide along the trial force) the predicted motion puts it on
+    (:meth:`ContactModel.tangential_law`); repeated until the set settles (a semismooth Newton
+    step on the model). Under force control, while no contact presses the upper plate its open
+    contacts stay active (the plate must come down to them). Returns (step, dh, model,
+    active)."""
+    n = problem.n
+    groups = _components(n, terms)
+    upper_open = [m for m, t in enumerate(terms) if t.upper and not t.bem]
+
+    def keep_plate_loaded(active: list) -> None:
+        if problem.force is not None and not any(a for t, a in zip(terms, active, strict=True)
+                                                 if t.upper):
+            for m in upper_open:
+                active[m] = True
+
+    active, laws = _statuses(terms, np.zeros((n, 6)), 0.0)
+    # a sliding contact starts on its stick branch (the elastic predictor from its current
+    # force): on the slide branch it has no stiffness along its slip, so a particle whose
+    # only way out is to roll back (a sphere under a plate that moved by more than the slip
+    # distance) sees a singular model whose least-norm step never reverses the slip; the
+    # passes below put it back on the slide branch if the step goes on along the slip
+    if _STICK_FIRST:
+        laws = [_elastic(t.model) if t.model.sliding and law.state == "slide" else law
+                for t, law in zip(terms, laws, strict=True)]
+    # an open contact closer than its approach at the force scale starts active: a particle
+    # pressed towards a neighbour it does not touch yet has no other support in the model (the
+    # pass below opens it again if the step does not close it)
+    active = [t.bem or t.sigma <= t.reach for t in terms]
+    keep_plate_loaded(active)
+    model = _model(n, terms, active, laws)
+    step, dh = _solve_model(problem, model, groups, R, plate, translate)
+    for _ in range(_ACTIVE_SET_PASSES):
+        new_active, new_laws = _statuses(terms, step, dh)
+        keep_plate_loaded(new_active)
+        if new_active == active and _same(new_laws, laws):
+            break
+        active, laws = new_active, new_laws
+        model = _model(n, terms, active, laws)
+        step, dh = _solve_model(problem, model, groups, R, plate, translate)
+    return step, dh, model, active
+
+
+def _residual_vector(problem: _Problem, ev: _Evaluation) -> tuple[np.ndarray, float]:
+    """(n, 6) residuals (forces N, moments N m) and the plate's force residual (N)."""
+    R = np.hstack([ev.forces, ev.moments])
+    plate = ev.plate_normal - problem.force if problem.force is not None else 0.0
+    return R, plate
+
+
+def _scaled(problem: _Problem, R: np.ndarray, plate: float, scale: float):
+    w = np.hstack([np.ones((problem.n, 3)), np.repeat(1.0 / problem.sizes[:, None], 3, 1)])
+    return R * w / scale, plate / scale
+
+
+def _merit(problem: _Problem, R: np.ndarray, plate: float, scale: float,
+           translate: bool = False) -> float:
+    """Half the sum of the squared scaled residuals (``translate``: forces and plate only)."""
+    Rs, ps = _scaled(problem, R, plate, scale)
+    if translate:
+        Rs = Rs[:, :3]
+    return 0.5 * math.fsum(np.concatenate([(Rs * Rs).ravel(), [ps * ps]]))
+
+
+#: the first phase of a step moves the particles (and the plate) without turning them until the
+#: forces balance within this share of the force scale
+_PHASE_ONE_TOL = 0.05
+_PHASE_ONE_PASSES = 12
+
+
+#: an attempt with the rotation-free phase is abandoned when, after that phase, the largest
+#: residual of the last _STALL passes is not below half the best before them
+#: (:func:`solve_cluster` then solves the step again without that phase)
+_STALL = 15
+
+
+def _stalled(log: list) -> bool:
+    if len(log) <= _STALL:
+        return False
+    worst = [entry[0] for entry in log]
+    return min(worst[-_STALL:]) > 0.5 * min(worst[:-_STALL])
+
+
+def _force_residual(problem: _Problem, ev: _Evaluation, scale: float) -> float:
+    R, plate = _residual_vector(problem, ev)
+    Rs, ps = _scaled(problem, R, plate, scale)
+    return max(float(np.abs(Rs[:, :3]).max()), abs(ps))
+
+
+#: at trust radius 1: the largest rotation of a particle (rad), translation (in sizes), and
+#: change of a contact's normal force (in its force, or the force scale if larger)
+_ROTATION, _TRANSLATION, _FORCE = 0.05, 0.05, 1.0
+
+
+def _limit(problem: _Problem, terms: list[_Term], active: list[bool], scale: float,
+           step: np.ndarray, dh: float, radius: float):
+    """The step scaled as a whole (one factor for every particle and the plate: the direction
+    and any symmetry are kept) so that at trust radius ρ no particle turns by more than
+    ρ _ROTATION or moves by more than ρ _TRANSLATION sizes, and no contact's normal force
+    changes by more than ρ _FORCE of itself or of the force scale. Returns (step, dh,
+    clipped)."""
+    factor = 1.0
+    for k in range(problem.n):
+        rot = float(np.linalg.norm(step[k, 3:]))
+        trans = float(np.linalg.norm(step[k, :3])) / problem.sizes[k]
+        if rot > radius * _ROTATION:
+            factor = min(factor, radius * _ROTATION / rot)
+        if trans > radius * _TRANSLATION:
+            factor = min(factor, radius * _TRANSLATION / trans)
+    for t, on in zip(terms, active, strict=True):
+        if not on:
+            continue
+        d = _approach_change(t, step, dh)
+        change = abs(t.kn * d) if t.bem else t.kn * max(d - t.sigma, 0.0)
+        allowed = radius * _FORCE * max(t.N, scale)
+        if change > allowed:
+            factor = min(factor, allowed / change)
+    if factor < 1.0:
+        return step * factor, dh * factor, True
+    return step, dh, False
+
+
+def _moved(centres, rotations, step):
+    new_centres = centres + step[:, :3]
+    new_rotations = [Rotation.from_rotvec(step[k, 3:]) * rotations[k]
+                     for k in range(len(rotations))]
+    return new_centres, new_rotations
+
+
+def _converged(problem: _Problem, ev: _Evaluation, tol: float) -> tuple[bool, float]:
+    R, plate = _residual_vector(problem, ev)
+    scale = ev.scale
+    if scale <= 0:
+        # nothing touches: every particle is free and balanced; under force control the plate
+        # carries nothing
+        worst = 0.0 if problem.force is None else math.inf
+        return worst <= tol, worst
+    Rs, _ = _scaled(problem, R, 0.0, scale)
+    worst = float(np.abs(Rs).max()) if Rs.size else 0.0
+    if problem.force is not None:
+        worst = max(worst, abs(plate) / problem.force)
+    return worst <= tol, worst
+
+
+# --- the solve -----------------------------------------------------------------------------
+def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, mu_up: float,
+                  mu_low: float, mu_pp=0.0, gap: float | None = None,
+                  force: float | None = None, gap_start: float | None = None,
+                  plate_shift=(0.0, 0.0), box=None,
+                  numerics: ClusterNumerics | None = None) -> ClusterResult:
+    """The equilibrium of a cluster of particles between the plates (module docstring).
+
+    Parameters
+    ----------
+    bodies : sequence of Body
+        The particles at their poses at the start of the step.
+    histories : mapping, optional
+        The contact histories at the start of the step (:attr:`ClusterResult.histories` of the
+        last step), by key; none for a first step.
+    mu_up, mu_low : float
+        Friction coefficients of the upper and the lower plate (>= 0).
+    mu_pp : float, mapping or callable
+        Particle-particle friction: one value, a mapping {(material_a, material_b): μ} (either
+        order), or a function (material_a, material_b) -> μ.
+    gap : float, optional
+        Gap control: the plate gap h, m.
+    force : float, optional
+        Force control: the total normal force F_N of the upper plate, N (> 0); h is solved for.
+        Exactly one of ``gap`` and ``force``.
+    gap_start : float, optional
+        The plate gap at the start of the step, m: the first guess under force control, and
+        where a new upper contact started (default: ``gap``, or under force control the top of
+        the cluster).
+    plate_shift : (2,) array
+        The upper plate's horizontal displacement in this step, m (default 0).
+    box : (L_x, L_y), optional
+        A periodic box in x and y, m.
+    numerics : ClusterNumerics, optional
+
+    Returns
+    -------
+    ClusterResult
+
+    Raises
+    ------
+    ValueError
+        Bad input (the message names the argument).
+    ClusterConvergenceError
+        The equilibrium was not found; the message names the largest residual and the particle.
+    """
+    numerics = numerics or ClusterNumerics()
+    bodies = list(bodies)
+    if not bodies:
+        raise ValueError("bodies: a cluster needs at least one particle")
+    for b in bodies:
+        if not isinstance(b, Body):
+            raise TypeError("bodies must be thirdbody.network.Body objects")
+    mu_up = _nonnegative(mu_up, "mu_up")
+    mu_low = _nonnegative(mu_low, "mu_low")
+    if not (callable(mu_pp) or isinstance(mu_pp, Mapping)):
+        mu_pp = _nonnegative(mu_pp, "mu_pp")
+    if (gap is None) == (force is None):
+        raise ValueError("give exactly one of gap (m) and force (N)")
+    if gap is not None:
+        gap = float(gap)
+        if not (math.isfinite(gap) and gap > 0):
+            raise ValueError(f"gap must be a finite number > 0 m, got {gap!r}")
+    if force is not None:
+        force = float(force)
+        if not (math.isfinite(force) and force > 0):
+            raise ValueError(f"force must be a finite number > 0 N, got {force!r}")
+    if box is not None:
+        box = tuple(float(v) for v in box)
+        if len(box) != 2 or not all(math.isfinite(v) and v > 0 for v in box):
+            raise ValueError(f"box must be two lengths (L_x, L_y) > 0 m, got {box!r}")
+    shift = np.asarray(plate_shift, dtype=float).reshape(-1)
+    if shift.shape != (2,) or not np.isfinite(shift).all():
+        raise ValueError(f"plate_shift must be a finite horizontal 2-vector, m, got "
+                         f"{plate_shift!r}")
+    histories = dict(histories or {})
+    for key, hist in histories.items():
+        if not isinstance(hist, ContactHistory) or hist.key != key:
+            raise ValueError(f"histories[{key!r}] must be the ContactHistory of that key")
+    tops = [float(b.centre[2] + b.shape.highest_point(b.rotation)[2]) for b in bodies]
+    if gap_start is None:
+        gap_start = gap if gap is not None else max(tops)
+    problem = _Problem(bodies, histories, mu_up, mu_low, _mu_function(mu_pp), gap, force,
+                       gap_start, shift, box, numerics)
+    h = gap if gap is not None else _first_gap(problem, float(gap_start))
+    try:
+        return _iterate(problem, h, phase_one=True)
+    except ClusterConvergenceError as first:
+        if not problem.phase_one_used:
+            raise
+        # the rotation-free first phase can leave the iteration in a state it does not leave
+        # (before sliding contacts started the Newton step on their stick branch: a sphere
+        # pressed into the groove of two others from touching, whose new contacts slid while
+        # the lower spheres could not turn); the whole step again without it
+        try:
+            return _iterate(problem, h, phase_one=False)
+        except ClusterConvergenceError:
+            raise first from None
+
+
+def _first_gap(problem: _Problem, h: float) -> float:
+    """A first plate gap under force control: the given one if the upper plate presses some
+    particle, else the top of the cluster less a Hertz estimate of two approaches under F_N."""
+    top = max(float(b.centre[2] + b.shape.highest_point(b.rotation)[2]) for b in problem.start)
+    if h < top:
+        return h
+    tallest = max(problem.start, key=lambda b: float(b.centre[2] + b.shape.highest_point(
+        b.rotation)[2]))
+    radius = tallest.shape.feature_length
+    E_star = tallest.material.E_star
+    delta = (9.0 * problem.force**2 / (16.0 * E_star**2 * radius)) ** (1.0 / 3.0)
+    return top - 2.0 * delta
+
+
+def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResult:
+    """The Newton iteration with its trust region (module docstring). A step starts (if
+    ``phase_one``) with a phase that holds the rotations: far from equilibrium (the first pass
+    of a step: the plate moved, new contacts carry nothing yet) the model's moments are
+    unreliable, since the geometric stiffness that decides which way a particle rolls scales
+    with contact forces that are still wrong; so the particles and the plate first move until
+    the forces balance within :data:`_PHASE_ONE_TOL` of the force scale, then everything
+    moves. That phase can also lead astray (:func:`solve_cluster` retries without it); an
+    attempt with it is abandoned when it stalls (:func:`_stalled`)."""
+    numerics = problem.numerics
+    centres = np.array([b.centre for b in problem.start], dtype=float)
+    rotations = [b.rotation for b in problem.start]
+    ev = problem.evaluate(centres, rotations, h, None)
+    solves = ev.solves
+    radius = numerics.radius
+    merit_scale = ev.scale if ev.scale > 0 else (problem.force or 1.0)
+    R, plate = _residual_vector(problem, ev)
+    translate = phase_one and \
+        _force_residual(problem, ev, ev.scale or merit_scale) > _PHASE_ONE_TOL
+    problem.phase_one_used = translate
+    phase_passes = phase_end = 0
+    merit = _merit(problem, R, plate, merit_scale, translate)
+    log = []
+    model = None
+    full = dh_full = None
+    for _iteration in range(numerics.max_iterations):
+        done, worst = _converged(problem, ev, numerics.tol)
+        if done:
+            log.append((worst, merit, radius, True))
+            return _result(problem, ev, worst, len(log), solves, log)
+        if problem.phase_one_used and not translate and _stalled(log[phase_end:]):
+            problem.failed = (len(log), solves)
+            raise ClusterConvergenceError(
+                f"cluster equilibrium stalled after the rotation-free phase: largest scaled "
+                f"residual {worst:.3e} > tol {numerics.tol:.1e} after {len(log)} passes")
+        if translate and (phase_passes >= _PHASE_ONE_PASSES or _force_residual(
+                problem, ev, ev.scale or merit_scale) <= _PHASE_ONE_TOL):
+            translate = False
+            phase_end = len(log)
+            merit = _merit(problem, R, plate, merit_scale)
+            radius = numerics.radius
+            model = None
+        t0 = time.perf_counter()
+        if model is None:
+            terms = _terms(problem, ev)
+            full, dh_full, model, active = _newton_step(problem, terms, R, plate, translate)
+        step, dh, clipped = _limit(problem, terms, active, ev.scale or merit_scale, full,
+                                   dh_full, radius)
+        out, plate_out = model.residual(R, plate, step, dh)
+        predicted = _merit(problem, out, plate_out, merit_scale, translate)
+        problem.timings["newton"] += time.perf_counter() - t0
+        trial_centres, trial_rotations = _moved(ev.centres, ev.rotations, step)
+        last = {c.key: c for c in ev.contacts}
+        try:
+            trial = problem.evaluate(trial_centres, trial_rotations, ev.h + dh, last)
+        except (ContactAtEdgeError, ConvergenceError, RuntimeError, ValueError) as exc:
+            log.append((worst, merit, radius, False))
+            radius *= 0.25
+            if radius < numerics.min_radius:
+                problem.failed = (len(log), solves)
+                raise ClusterConvergenceError(
+                    f"cluster equilibrium: a contact could not be solved at the trial poses "
+                    f"({exc}); residual {worst:.3e} > tol {numerics.tol:.1e}") from exc
+            continue
+        solves += trial.solves
+        phase_passes += translate
+        R_trial, plate_trial = _residual_vector(problem, trial)
+        merit_trial = _merit(problem, R_trial, plate_trial, merit_scale, translate)
+        done_trial, _ = _converged(problem, trial, numerics.tol)
+        fall = merit - merit_trial
+        expected = merit - predicted
+        accepted = done_trial or fall > 0
+        log.append((worst, merit, radius, accepted))
+        if accepted:
+            ratio = fall / expected if expected > 0 else 0.0
+            if ratio > 0.5 and clipped:
+                radius = min(2.0 * radius, 4.0)
+            elif ratio < 0.25:
+                radius *= 0.5
+            ev, R, plate, merit = trial, R_trial, plate_trial, merit_trial
+            model = None
+        else:
+            radius *= 0.25
+            if radius < numerics.min_radius:
+                break
+    done, worst = _converged(problem, ev, numerics.tol)
+    if done:
+        return _result(problem, ev, worst, len(log), solves, log)
+    k = int(np.argmax(np.abs(_scaled(problem, *_residual_vector(problem, ev), ev.scale or 1.0
+                                     )[0]).max(axis=1)))
+    problem.failed = (len(log), solves)
+    raise ClusterConvergenceError(
+        f"cluster equilibrium did not converge in {len(log)} passes: largest scaled residual "
+        f"{worst:.3e} > tol {numerics.tol:.1e} (particle {problem.order[k]}: force "
+        f"{np.linalg.norm(ev.forces[k]):.3e} N, moment {np.linalg.norm(ev.moments[k]):.3e} N m; "
+        f"trust radius {radius:.1e} rad)")
+
+
+# --- the result ----------------------------------------------------------------------------
+def _result(problem: _Problem, ev: _Evaluation, worst: float, passes: int, solves: int,
+            log) -> ClusterResult:
+    n = problem.n
+    numerics = problem.numerics
+    order = problem.order
+    bodies = [None] * n
+    translation = np.zeros((n, 3))
+    rotation = np.zeros((n, 3))
+    forces = np.zeros((n, 3))
+    moments = np.zeros((n, 3))
+    for k in range(n):
+        u = order[k]
+        b = problem.body(k, ev.centres, ev.rotations)
+        bodies[u] = b
+        translation[u] = b.centre - problem.start[k].centre
+        rotation[u] = (b.rotation * problem.start[k].rotation.inv()).as_rotvec()
+        forces[u] = ev.forces[k]
+        moments[u] = ev.moments[k]
+    histories = {}
+    reports = []
+    touched = [[] for _ in range(n)]
+    upper, lower = [], []
+    for c in ev.contacts:
+        s = c.contact
+        key = problem.user_key(c.key)
+        if isinstance(s, PlateContact):
+            k = c.key[0]
+            roles = (order[k], c.key[1])
+            touched[order[k]].append(s.sliding)
+            (upper if c.key[1] == "upper" else lower).append(s.force)
+            reports.append(ContactReport(
+                key=key, i=order[k], j=c.key[1], normal=s.normal, force=s.force,
+                normal_force=s.normal_force, tangential_force=s.tangential_force,
+                point=s.pressure_centroid, moment_i=s.moment, moment_j=np.zeros(3),
+                approach=s.approach, area=s.area, stick_area=s.stick_area, spots=s.spots,
+                slip=np.append(s.slip, 0.0), shift_increment=np.append(s.shift_increment, 0.0),
+                sliding=s.sliding, state="slide" if s.sliding else "stick",
+                half_space_ratio=s.half_space_ratio, mu=s.mu))
+            ratio = s.half_space_ratio
+        else:
+            a, b = c.roles
+            roles = (order[a], order[b])
+            sliding = not bool(s.stick.any())
+            touched[order[a]].append(sliding)
+            touched[order[b]].append(sliding)
+            i = key[0]
+            flip = roles[0] != i                  # i is body b
+            sign = -1.0 if flip else 1.0
+            reports.append(ContactReport(
+                key=key, i=i, j=key[1], normal=sign * s.normal, force=sign * s.force_on_a,
+                normal_force=s.normal_force, tangential_force=sign * s.tangential_force,
+                point=s.pressure_centroid, moment_i=s.moment_b if flip else s.moment_a,
+                moment_j=s.moment_a if flip else s.moment_b, approach=s.approach,
+                area=s.area, stick_area=s.stick_area, spots=s.spots, slip=sign * s.slip,
+                shift_increment=sign * s.shift_increment, sliding=sliding,
+                state="slide" if sliding else "stick", half_space_ratio=s.half_space_ratio,
+                mu=s.mu))
+            ratio = s.half_space_ratio
+        if ratio > numerics.half_space_limit:
+            warnings.warn(HalfSpaceWarning(
+                f"contact {key}: contact radius / radius of curvature = {ratio:.3g} > "
+                f"{numerics.half_space_limit:.3g}: out of the half-space model's range"),
+                stacklevel=3)
+        histories[key] = ContactHistory(key, roles, s)
+    kinematics = []
+    for u in range(n):
+        slides = touched[u]
+        if not slides:
+            kinematics.append("free")
+        elif all(slides):
+            kinematics.append("slide")
+        elif any(slides):
+            kinematics.append("roll")
+        elif np.linalg.norm(rotation[u]) > numerics.stick_rotation:
+            kinematics.append("roll")
+        else:
+            kinematics.append("stick")
+    reports.sort(key=lambda r: _sort_key(r.key))
+
+    def total(vectors):
+        if not vectors:
+            return np.zeros(3)
+        V = np.array(vectors)
+        return np.array([math.fsum(V[:, d]) for d in range(3)])
+
+    return ClusterResult(
+        bodies=tuple(bodies), translation=translation, rotation=rotation,
+        histories=dict(sorted(histories.items(), key=lambda kv: _sort_key(kv[0]))),
+        gap=float(ev.h), plate_force=total(upper), lower_force=total(lower),
+        contacts=tuple(reports), force_residual=forces, moment_residual=moments,
+        residual=float(worst), force_scale=float(ev.scale), kinematics=tuple(kinematics),
+        iterations=passes + problem.failed[0], bem_solves=solves + problem.failed[1],
+        history=tuple(log),
+        timings=dict(problem.timings), tol=numerics.tol)
+
+
+def _sort_key(key: tuple):
+    if len(key) == 2:
+        return (key[0], 1, PLATES.index(key[1]), 0, 0)
+    return (key[0], 0, key[1], key[2][0], key[2][1])
+
+
+def wrap(result_bodies: Sequence[Body], histories: Mapping, box) -> tuple[list[Body], dict]:
+    """Move every centroid into the box [0, L_x) x [0, L_y) and rename the pair histories'
+    keys to the images that then meet (the contacts and their histories are unchanged)."""
+    box = (float(box[0]), float(box[1]))
+    moved = []
+    jumps = []
+    for b in result_bodies:
+        c = np.array(b.centre, dtype=float)
+        m = (math.floor(c[0] / box[0]), math.floor(c[1] / box[1]))
+        c[0] -= m[0] * box[0]
+        c[1] -= m[1] * box[1]
+        moved.append(b.moved(centre=c))
+        jumps.append(m)
+    out = {}
+    for key, hist in histories.items():
+        if len(key) == 3:
+            i, j, image = key
+            # c_j + image L meets c_i; after the moves c_j' = c_j − m_j L, c_i' = c_i − m_i L
+            new = (image[0] + jumps[j][0] - jumps[i][0], image[1] + jumps[j][1] - jumps[i][1])
+            key = (i, j, new)
+            solved = hist.solved
+            # the stored bodies move with their particles (same image relation)
+            shift_a = np.array([-jumps[hist.roles[0]][0] * box[0],
+                                -jumps[hist.roles[0]][1] * box[1], 0.0])
+            solved = _translated(solved, shift_a)
+            hist = ContactHistory(key, hist.roles, solved)
+        else:
+            i = key[0]
+            shift = np.array([-jumps[i][0] * box[0], -jumps[i][1] * box[1], 0.0])
+            hist = ContactHistory(key, hist.roles, _translated(hist.solved, shift))
+        out[key] = hist
+    return moved, out
+
+
+def _translated(solved, shift: np.ndarray):
+    """A solved contact with every world position moved by ``shift`` (m)."""
+    from dataclasses import replace
+
+    if isinstance(solved, PlateContact):
+        return replace(solved, body=solved.body.moved(centre=solved.body.centre + shift),
+                       pressure_centroid=solved.pressure_centroid + shift)
+    return replace(solved, a=solved.a.moved(centre=solved.a.centre + shift),
+                   b=solved.b.moved(centre=solved.b.centre + shift),
+                   origin=solved.origin + shift,
+                   pressure_centroid=solved.pressure_centroid + shift)

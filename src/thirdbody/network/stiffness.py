@@ -1,0 +1,350 @@
+"""A model of a solved contact's wrench as a function of the rigid motions of its two bodies:
+what the network's Newton iteration (:mod:`~thirdbody.network.cluster`) predicts with, the BEM
+being the corrector.
+
+A contact between bodies a and b (b may be a plate) with unit normal n (from a to b) exerts on
+a the force f = −N n + T at the pressure centroid x_p and the moment m n about the normal
+(the tractions' twist), so that about a's centroid c_a
+
+    M_a = (x_p − c_a) × f + m n,        F_b = −f,        M_b = −(x_p − c_b) × f − m n.
+
+For virtual motions (du, dφ) of both bodies, the relative motion of b's material point at x_p
+is dt = du_b + dφ_b × (x_p − c_b) − du_a − dφ_a × (x_p − c_a), the relative rotation
+dψ = dφ_b − dφ_a, the approach changes by dδ = −n·dt and the tangential relative displacement is
+ds = P dt (P = I − n nᵀ). The contact law, modelled from the last BEM solve:
+
+* normal: dN = k_n dδ with k_n = 3N/(2δ) (Hertz: N ∝ δ^(3/2); δ the approach from first
+  touch);
+* tangential: Coulomb's law as an elastic predictor and a return to the friction cone: the trial
+  force T + k ds must satisfy |T + k ds| <= μ(N + dN), else the contact slides with
+  μ(N + dN) along the trial. The stiffness k is Mindlin's partial-slip one, k₀ c/a with
+  k₀ = 8a/Σ(2 − ν_i)/G_i (Johnson 1985, §7.2) and c/a = √(A_stick/A) the stick zone's share
+  (for Cattaneo-Mindlin c/a = (1 − Q/μN)^(1/3) and the tangent stiffness is k₀ (1 − Q/μN)^(1/3)),
+  while loading further; k₀ when unloading (Mindlin-Deresiewicz: the stiffness after a reversal
+  is the initial one) or when a sliding contact's slip reverses. A sliding contact whose slip
+  goes on keeps μ(N + dN) along its slip, turning with stiffness μN/|slip| across it. In
+  partial slip the force also grows with N at a fixed shift (the contact grows): Cattaneo-
+  Mindlin's dT/dN (:meth:`ContactModel._stick_normal`). The caller (the active set of
+  :mod:`~thirdbody.network.cluster`) picks the branch from the predicted motion and
+  linearises it there (:meth:`ContactModel.tangential_law`);
+* twist: dm = k_w n·dψ with Lubkin's (16/3) a³/Σ(1/G_i) times (c/a)³ (0 while sliding);
+
+and the geometry of the rigid bodies (Montana's contact kinematics, to first order): relative to
+a's material the contact point moves in the tangent plane by ξ = H⁺ (K_b P dt − n × dψ), with
+K_a, K_b the curvature tensors of the two surfaces at the contact and H = K_a + K_b, and the
+normal turns by dn = dφ_a × n + K_a ξ. So a particle that rolls about one contact while the
+other slides has stiffness only from how its contacts migrate over its surface and how its
+height changes: the moment the geometry leaves unbalanced drives it, as in the one-particle
+turn.
+
+All quantities SI, world frame; blocks are (6, 12) arrays: rows (force, moment) on a or b,
+columns (du_a, dφ_a, du_b, dφ_b).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+__all__ = ["ContactModel", "TangentialLaw", "skew"]
+
+_I = np.eye(3)
+_O = np.zeros((3, 3))
+
+
+def skew(v) -> np.ndarray:
+    """The matrix [v]× with [v]× w = v × w."""
+    x, y, z = (float(c) for c in v)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+@dataclass(frozen=True)
+class TangentialLaw:
+    """A linearised branch of the tangential law: T_model = T + stiffness ds + g dN + offset,
+    with ``stiffness`` (3, 3), ``g`` (3,) and ``offset`` (3,) world, SI; ``state`` "stick" or
+    "slide"."""
+
+    stiffness: np.ndarray
+    g: np.ndarray
+    offset: np.ndarray
+    state: str
+
+
+@dataclass(frozen=True)
+class ContactModel:
+    """A contact's wrench and its model, from its last BEM solve (module docstring).
+
+    Attributes
+    ----------
+    normal : (3,) array
+        Unit normal from a to b.
+    point : (3,) array
+        Pressure centroid x_p, m.
+    centre_a, centre_b : (3,) arrays
+        The bodies' centroids (b: any point for a plate), m.
+    normal_force : float
+        N, N.
+    tangential_force : (3,) array
+        T on a, N.
+    twist_moment : float
+        m, N m.
+    k_normal : float
+        N/m.
+    mu : float
+    k_loading : float
+        Tangential stiffness while loading further (Mindlin's k₀ c/a), N/m.
+    k_stick : float
+        k₀, N/m: unloading, or after a reversal.
+    slip_direction : (3,) array or None
+        The direction a sliding contact slides in (b over a), None if it has stick cells.
+    k_across : float
+        μN/|slip| of a sliding contact, N/m.
+    k_twist : float
+        N m/rad.
+    curvature_a, curvature_b : (3, 3) arrays
+        Curvature tensors on the tangent plane, world, 1/m.
+    """
+
+    normal: np.ndarray
+    point: np.ndarray
+    centre_a: np.ndarray
+    centre_b: np.ndarray
+    normal_force: float
+    tangential_force: np.ndarray
+    twist_moment: float
+    k_normal: float
+    mu: float
+    k_loading: float
+    k_stick: float
+    slip_direction: np.ndarray | None
+    k_across: float
+    k_twist: float
+    curvature_a: np.ndarray
+    curvature_b: np.ndarray
+    mid_a: np.ndarray | None = None
+    mid_b: np.ndarray | None = None
+    turn_a: np.ndarray | None = None
+    turn_b: np.ndarray | None = None
+    fraction: float = 1.0
+    touch: np.ndarray | None = None
+
+    def stepping(self, *, mid_a, mid_b, turn_a, turn_b, fraction: float) -> ContactModel:
+        """The same model with the kinematics of the step's shift increment (the evaluation's
+        :func:`~thirdbody.network.plate.solve_plate` and the cluster's pair shift): levers
+        ``mid_a``, ``mid_b`` (m) at the middle of the step, the bodies' rotation vectors since
+        the start of the step ``turn_a``, ``turn_b`` (rad), and the share of the motion the
+        contact sees."""
+        return replace(self, mid_a=np.asarray(mid_a, dtype=float),
+                       mid_b=np.asarray(mid_b, dtype=float),
+                       turn_a=np.asarray(turn_a, dtype=float),
+                       turn_b=np.asarray(turn_b, dtype=float), fraction=float(fraction))
+
+    @classmethod
+    def of(cls, *, normal, point, centre_a, centre_b, normal_force, tangential_force,
+           twist_moment, approach, area, stick_area, mu, slip, compliance, torsion,
+           curvature_a, curvature_b, sliding) -> ContactModel:
+        """The model of a solved contact.
+
+        ``compliance`` is Σ(2 − ν_i)/G_i (1/Pa) and ``torsion`` Σ 1/G_i (1/Pa) over the elastic
+        bodies; ``slip`` the mean slip increment of b over a (world, m); ``sliding``: no stick
+        cell (with μ > 0)."""
+        n = np.asarray(normal, dtype=float)
+        P = _I - np.outer(n, n)
+        N = float(normal_force)
+        radius = math.sqrt(max(area, 0.0) / math.pi)
+        k0 = 8.0 * radius / compliance
+        kn = 1.5 * N / approach if approach > 0 else 0.0
+        T = np.asarray(tangential_force, dtype=float)
+        direction = None
+        across = 0.0
+        share = 0.0
+        if mu <= 0 or N <= 0:
+            k0 = 0.0
+        elif sliding:
+            s = np.asarray(slip, dtype=float) @ P
+            length = float(np.linalg.norm(s))
+            if length > 0:
+                direction = s / length
+            elif np.linalg.norm(T) > 0:
+                direction = T / np.linalg.norm(T)
+            else:
+                direction = P @ np.array([1.0, 0.0, 0.0])
+                direction /= np.linalg.norm(direction)
+            across = k0 if length == 0 else min(mu * N / length, k0)
+        else:
+            share = math.sqrt(max(stick_area, 0.0) / area) if area > 0 else 0.0
+        kw = 16.0 / 3.0 * radius**3 / torsion * share**3
+        return cls(n, np.asarray(point, dtype=float), np.asarray(centre_a, dtype=float),
+                   np.asarray(centre_b, dtype=float), N, T, float(twist_moment), kn, float(mu),
+                   k0 * share, k0, direction, across, kw,
+                   np.asarray(curvature_a, dtype=float), np.asarray(curvature_b, dtype=float))
+
+    @classmethod
+    def spring(cls, *, normal, point, centre_a, centre_b, stiffness: float,
+               tangential: float = 0.0, mu: float = 0.0) -> ContactModel:
+        """A contact that is open now: the normal stiffness (N/m) and tangential stick
+        stiffness (N/m) it would have once closed, no force."""
+        zero = np.zeros((3, 3))
+        return cls(np.asarray(normal, dtype=float), np.asarray(point, dtype=float),
+                   np.asarray(centre_a, dtype=float), np.asarray(centre_b, dtype=float), 0.0,
+                   np.zeros(3), 0.0, float(stiffness), float(mu), float(tangential),
+                   float(tangential), None, 0.0, 0.0, zero, zero)
+
+    @property
+    def sliding(self) -> bool:
+        return self.slip_direction is not None
+
+    @property
+    def force_on_a(self) -> np.ndarray:
+        return -self.normal_force * self.normal + self.tangential_force
+
+    @property
+    def arms(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.point - self.centre_a, self.point - self.centre_b
+
+    def relative_rows(self) -> np.ndarray:
+        """dt (3, 12): b's material point at x_p relative to a's, for (du_a, dφ_a, du_b, dφ_b)."""
+        ra, rb = self.arms
+        return np.hstack([-_I, skew(ra), _I, -skew(rb)])
+
+    def approach_row(self) -> np.ndarray:
+        """dδ (12,): the relative normal motion at the point of first touch (``touch``, the
+        closest points of the undeformed surfaces; the pressure centroid if not given): by the
+        envelope theorem the closest points' own migration does not change the separation to
+        first order. (The pressure centroid lies a fraction of a cell away, which matters
+        where the motions of a step nearly cancel in the approach: a rotation of the particle
+        against the plates' motion.)"""
+        if self.touch is None:
+            return -(self.normal @ self.relative_rows())
+        ra = self.touch - self.centre_a
+        rb = self.touch - self.centre_b
+        dt = np.hstack([-_I, skew(ra), _I, -skew(rb)])
+        return -(self.normal @ dt)
+
+    def tangential_rows(self) -> np.ndarray:
+        """The shift increment's change (3, 12). Without the step's kinematics, ds = P dt.
+        With them (:meth:`stepping`): the evaluated increment is
+        Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at the
+        middle of the step, so ds = f P [dt(r̄) + ½ Δφ_b × dr_b − ½ Δφ_a × dr_a], dr the
+        levers' change (the contact point migrates)."""
+        n = self.normal
+        P = _I - np.outer(n, n)
+        if self.mid_a is None:
+            return P @ self.relative_rows()
+        dt = np.hstack([-_I, skew(self.mid_a), _I, -skew(self.mid_b)])
+        _, _, d_ra, d_rb = self._geometry()
+        dt = dt + 0.5 * (skew(self.turn_b) @ d_rb - skew(self.turn_a) @ d_ra)
+        return self.fraction * (P @ dt)
+
+    def _geometry(self):
+        """(ξ, dn, dr_a, dr_b) as (3, 12) arrays: the contact point's migration over a, the
+        normal's turn and the levers' changes (module docstring)."""
+        n = self.normal
+        P = _I - np.outer(n, n)
+        ra, _ = self.arms
+        ua = np.hstack([_I, _O, _O, _O])
+        pa = np.hstack([_O, _I, _O, _O])
+        ub = np.hstack([_O, _O, _I, _O])
+        dt = self.relative_rows()
+        dpsi = np.hstack([_O, -_I, _O, _I])
+        H = P @ (self.curvature_a + self.curvature_b) @ P
+        Hplus = np.linalg.pinv(H, rcond=1e-9, hermitian=True)
+        xi = Hplus @ (self.curvature_b @ P @ dt - skew(n) @ dpsi)
+        dn = P @ (-skew(n) @ pa + self.curvature_a @ xi)
+        d_ra = -skew(ra) @ pa + xi
+        d_rb = ua - skew(ra) @ pa + xi - ub
+        return xi, dn, d_ra, d_rb
+
+    def wrenches(self) -> tuple[np.ndarray, np.ndarray]:
+        """The (6,) wrenches (force, moment about the centroid) on a and on b of the contact's
+        current force and twist."""
+        f = self.force_on_a
+        ra, rb = self.arms
+        m = self.twist_moment * self.normal
+        return (np.concatenate([f, np.cross(ra, f) + m]),
+                np.concatenate([-f, -np.cross(rb, f) - m]))
+
+    def base_blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """The (6, 12) blocks d(F_a, M_a), d(F_b, M_b) of everything but the tangential law:
+        the normal force's change, the rigid geometry (the normal turns, the point migrates, T
+        stays in the tangent plane) and the twist."""
+        n = self.normal
+        ra, rb = self.arms
+        f = self.force_on_a
+        N, T, m = self.normal_force, self.tangential_force, self.twist_moment
+        dpsi = np.hstack([_O, -_I, _O, _I])
+        # the contact point migrates over a (Montana) and the normal turns
+        _, dn, d_ra, d_rb = self._geometry()
+        dN = self.k_normal * self.approach_row()
+        df = -np.outer(n, dN) - N * dn - np.outer(n, T @ dn)
+        dm = self.k_twist * (n @ dpsi)
+        dMa = -skew(f) @ d_ra + skew(ra) @ df + np.outer(n, dm) + m * dn
+        dMb = skew(f) @ d_rb - skew(rb) @ df - np.outer(n, dm) - m * dn
+        return np.vstack([df, dMa]), np.vstack([-df, dMb])
+
+    def tangential_law(self, ds: np.ndarray, dN: float) -> TangentialLaw:
+        """The branch of the tangential law at the predicted tangential displacement ``ds``
+        (3,) and normal force change ``dN``, linearised there (module docstring)."""
+        n = self.normal
+        P = _I - np.outer(n, n)
+        T = self.tangential_force
+        zero = np.zeros(3)
+        if self.mu <= 0 or self.k_stick <= 0:
+            return TangentialLaw(np.zeros((3, 3)), zero, zero, "slide")
+        limit = self.mu * max(self.normal_force + dN, 0.0)
+        if self.sliding and float(ds @ self.slip_direction) >= 0:
+            d = self.slip_direction
+            return TangentialLaw(self.k_across * (P - np.outer(d, d)), self.mu * d,
+                                 self.mu * self.normal_force * d - T, "slide")
+        loading = not self.sliding and float(ds @ T) > 0
+        k = self.k_loading if loading else self.k_stick
+        g = self._stick_normal() if not self.sliding else zero
+        trial = T + k * ds + g * dN
+        size = float(np.linalg.norm(trial))
+        if size <= limit or size == 0:
+            return TangentialLaw(k * P, g, zero, "stick")
+        d = trial / size
+        across = self.mu * self.normal_force / size * k * (P - np.outer(d, d))
+        value = self.mu * self.normal_force * d - across @ ds
+        return TangentialLaw(across, self.mu * d, value - T, "slide")
+
+    def _stick_normal(self) -> np.ndarray:
+        """dT/dN at a fixed shift of a contact in partial slip (3,): Cattaneo-Mindlin's
+        T = μN [1 − (1 − u)^(3/2)] with u = s/s*, s* ∝ N^(2/3), gives
+        dT/dN = μ [q − u (1 − q)^(1/3)] along T, q = |T|/(μN), u = 1 − (1 − q)^(2/3)
+        (T/(3N) for a small load ratio: the stick stiffness grows with the contact radius)."""
+        T = self.tangential_force
+        size = float(np.linalg.norm(T))
+        if size == 0 or self.normal_force <= 0 or self.mu <= 0:
+            return np.zeros(3)
+        q = min(size / (self.mu * self.normal_force), 1.0)
+        u = 1.0 - (1.0 - q) ** (2.0 / 3.0)
+        return self.mu * (q - u * (1.0 - q) ** (1.0 / 3.0)) * T / size
+
+    def law_blocks(self, law: TangentialLaw) -> tuple[np.ndarray, np.ndarray, np.ndarray,
+                                                      np.ndarray]:
+        """The (6, 12) blocks of a tangential law's dT and the (6,) wrenches of its offset, on a
+        and on b."""
+        ra, rb = self.arms
+        dT = law.stiffness @ self.tangential_rows() + \
+            np.outer(law.g, self.k_normal * self.approach_row())
+        on_a = np.vstack([dT, skew(ra) @ dT])
+        on_b = -np.vstack([dT, skew(rb) @ dT])
+        c = law.offset
+        return (on_a, on_b, np.concatenate([c, np.cross(ra, c)]),
+                -np.concatenate([c, np.cross(rb, c)]))
+
+    def blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tangent blocks at a zero step (the law's branch at an infinitesimal loading
+        step along the current force, or along the slip of a sliding contact)."""
+        base_a, base_b = self.base_blocks()
+        if self.sliding:
+            probe = self.slip_direction
+        else:
+            size = float(np.linalg.norm(self.tangential_force))
+            probe = self.tangential_force / size if size > 0 else np.zeros(3)
+        law = self.tangential_law(1e-300 * probe, 0.0)
+        la, lb, _, _ = self.law_blocks(law)
+        return base_a + la, base_b + lb
