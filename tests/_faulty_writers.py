@@ -32,3 +32,15 @@ class GatedWriter(results._StepWriter):
         while not os.path.exists(os.environ["THIRDBODY_TEST_GATE"]):
             time.sleep(0.01)
         super().save(sim, blob)
+
+
+class LateWriter(results._StepWriter):
+    """Received (unpickled) by the child only once the file named by $THIRDBODY_TEST_GATE
+    exists: the child is not ready until then."""
+
+    def __setstate__(self, state):
+        import os
+
+        while not os.path.exists(os.environ["THIRDBODY_TEST_GATE"]):
+            time.sleep(0.01)
+        self.__dict__.update(state)

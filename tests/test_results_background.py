@@ -239,10 +239,13 @@ def test_steps_bigger_than_the_pipe_all_reach_the_file(monkeypatch, tmp_path, ch
 
 def test_the_run_waits_for_a_child_more_than_a_few_steps_behind(monkeypatch, tmp_path,
                                                                  children):
-    """The child saves nothing until a gate opens (a second after the start): the run hands
-    over steps 0 to _MAX_BEHIND - 1, then waits at step _MAX_BEHIND until the child has saved
-    a step, so that no step after it is computed before the gate opened. After every step the
-    run is at most _MAX_BEHIND steps ahead of the file, and holds nothing in memory."""
+    """The child, once ready, saves nothing until a gate opens (a second after the start): the
+    run hands over steps 0 to _MAX_BEHIND - 1, then waits at step _MAX_BEHIND until the child
+    has saved a step, so that no step after it is computed before the gate opened. After every
+    step the run is at most _MAX_BEHIND steps ahead of the file, and holds nothing in memory.
+    (The run is held at its first step until the child says it is ready: the bound holds from
+    then on; the next test is about the time before.)"""
+    import select
     import threading
 
     from _faulty_writers import GatedWriter
@@ -254,6 +257,9 @@ def test_the_run_waits_for_a_child_more_than_a_few_steps_behind(monkeypatch, tmp
     original = results._BackgroundWriter.__call__
 
     def call(self, sim, state):
+        while not self.ready:
+            select.select([self.replies], [], [], 0.1)
+            self._check()
         original(self, sim, state)
         behind.append(len(sim.records) - self.saved)
         waiting.append(len(self.backlog))
@@ -269,6 +275,40 @@ def test_the_run_waits_for_a_child_more_than_a_few_steps_behind(monkeypatch, tmp
     bound = results._MAX_BEHIND
     assert max(behind) <= bound and waiting == [0] * 8
     assert all(opened for step, opened in computed if step > bound), computed
+    assert children[0].stats["appended"] == 7
+    straight = potato_sim(steps=8).run()
+    xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
+                                straight.drop_vars(_timers(ds)))
+
+
+def test_the_run_does_not_wait_for_a_child_that_is_not_ready_yet(monkeypatch, tmp_path,
+                                                                 children):
+    """A child that starts slowly (it receives the writer only once a gate opens): the run
+    computes and hands over all 8 steps meanwhile (the gate is opened by the run's last step; a
+    run that waited for the child would only go on when a 60 s fallback opened it), then the
+    child saves them all, and the file is the uninterrupted run."""
+    import threading
+
+    from _faulty_writers import LateWriter
+
+    gate = tmp_path / "gate"
+    monkeypatch.setenv("THIRDBODY_TEST_GATE", str(gate))
+    monkeypatch.setattr(results, "_StepWriter", LateWriter)
+    opened_by = []
+
+    def progress(record):
+        if record.step == 7 and not gate.exists():
+            opened_by.append("the run")
+            gate.touch()
+
+    fallback = threading.Timer(60.0, lambda: (opened_by.append("fallback"), gate.touch()))
+    fallback.start()
+    try:
+        ds = run_to_file(potato_sim(steps=8), tmp_path / "r.nc", background=True,
+                         progress=progress)
+    finally:
+        fallback.cancel()
+    assert opened_by == ["the run"]
     assert children[0].stats["appended"] == 7
     straight = potato_sim(steps=8).run()
     xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),

@@ -339,7 +339,11 @@ class _BackgroundWriter:
     The whole step goes into the pipe before the run goes on, so nothing waits in this
     process's memory: if the run is killed, only the step in progress is lost. The child
     reports each step it has saved; when it is more than :data:`_MAX_BEHIND` steps behind,
-    the run waits for it, so that the file follows the run.
+    the run waits for it, so that the file follows the run. The bound holds from the moment the
+    child says it is ready (its interpreter started and the writer received, a second or two):
+    until then the run goes on, its steps waiting in the pipe, which the child saves even if the
+    run is killed. A short run then overlaps its last steps and its own final work with the
+    child's start instead of waiting for it.
 
     The child runs in its own session: Ctrl-C, sent to the terminal's process group, does not
     reach it, and :meth:`close` lets it save every step it was sent. If the run is killed, the
@@ -358,6 +362,7 @@ class _BackgroundWriter:
         self.stats: dict = {}                        # the child's counters, after close()
         self.seconds = 0.0                           # wall time of the run spent here
         self.frame_bytes: list[int] = []             # the size of each step sent
+        self.ready = False                           # the child has received the writer
         start = time.perf_counter()
         self.proc = subprocess.Popen([sys.executable, "-m", "thirdbody.io._writer"],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
@@ -378,7 +383,8 @@ class _BackgroundWriter:
         blob = zlib.compress(sim.snapshot(state, history=False), 1)
         self._send(_pickled((sim.records[n:], sim.maps[m:], blob, sim.status)))
         self.sent = (len(sim.records), len(sim.maps))
-        self._wait_for(len(sim.records) - _MAX_BEHIND)
+        if self.ready:
+            self._wait_for(len(sim.records) - _MAX_BEHIND)
         self.seconds += time.perf_counter() - start
 
     def _send(self, data: bytes) -> None:
@@ -422,6 +428,8 @@ class _BackgroundWriter:
                 break
             if kind == "saved":
                 self.saved = value
+            elif kind == "ready":
+                self.ready = True
             elif kind == "error":
                 raise value
             elif kind == "done":
@@ -500,6 +508,7 @@ def serve(reader: int = 0, replies: int = 1) -> None:
     busy = 0.0
     try:
         writer, sim = pickle.loads(_read_frame(reader))
+        _reply(replies, ("ready", None))
         # xarray takes its write lock from dask's scheduler: a local one here
         with dask.config.set(scheduler="synchronous"):
             while True:
