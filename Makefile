@@ -12,7 +12,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz sweep test test-fast lint docs bench \
+.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz sweep test test-all test-fast lint docs bench \
 	bench-tangential bench-simulation bench-sweep bench-layer mutation clean venv
 
 $(BIN)/activate:
@@ -58,10 +58,16 @@ layer-hertz: $(VENV)/.installed-test
 sweep: $(VENV)/.installed-test
 	$(BIN)/thirdbody sweep src/thirdbody/examples/sweep_fig4.toml -o $(OUT)/sweep_fig4
 
+# CI: ruff, the docs built strictly, every test not marked slow (under 10 minutes on 2 cores)
 test: $(VENV)/.installed-test
 	$(BIN)/ruff check src tests benchmarks examples docs/hooks
 	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet --site-dir site
-	$(BIN)/python -m pytest -n 2 --dist loadfile
+	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not slow"
+
+# everything: make test, then the slow cases (kills and resumes, whole paper runs, sweeps'
+# interrupts, the README's and the pages' heavier snippets); before merging a solver change
+test-all: test
+	$(BIN)/python -m pytest -n 2 --dist loadfile -m slow
 
 test-fast: $(VENV)/.installed-test
 	$(BIN)/python -m pytest -n 2 --dist loadfile -m "not slow" -x -q

@@ -1,16 +1,11 @@
 """The command line: config validation (exit 2, nothing written), --print-config, run, plot,
 examples, validate, and a run killed with SIGKILL then resumed equals an uninterrupted one."""
 
-import os
-import signal
 import subprocess
 import sys
-import time
 import tomllib
 
-import numpy as np
 import pytest
-import xarray as xr
 from typer.testing import CliRunner
 
 from thirdbody import particle_view
@@ -116,73 +111,6 @@ def test_validate_prints_the_table_and_passes():
     assert result.output.count(" yes") == 7 and "NO" not in result.output
 
 
-def _steps_done(path):
-    try:
-        with xr.open_dataset(path, engine="h5netcdf") as ds:
-            return ds.sizes.get("step", 0), ds.attrs["status"]
-    except (OSError, KeyError, ValueError):
-        return 0, None
-
-
-def _lock_free(out, timeout: float = 120.0) -> bool:
-    """Whether the output directory's lock can be taken within ``timeout`` s: a killed run's
-    child, saving the steps it was sent, holds it until it is done."""
-    import fcntl
-
-    from thirdbody.cli.lock import LOCK_NAME
-
-    deadline = time.monotonic() + timeout
-    while (out / LOCK_NAME).exists():
-        with (out / LOCK_NAME).open() as handle:
-            try:
-                fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                return True
-            except BlockingIOError:
-                pass
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.05)
-    return True
-
-
-@pytest.mark.slow
-def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path):
-    """SIGKILL once the file holds 3 steps. What is guaranteed, however fast the run went
-    meanwhile: once its child has saved what it was sent, the file is valid and holds whole
-    steps 0..n-1, at least the 3 seen; resumed (if it was not complete), it equals an
-    uninterrupted run."""
-    config = write(tmp_path, SMALL.replace("{steps}", "24"))
-    cmd = [sys.executable, "-m", "thirdbody.cli", "run", str(config), "--no-plots"]
-    killed = tmp_path / "killed"
-    proc = subprocess.Popen([*cmd, "-o", str(killed)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
-    deadline = time.time() + 300
-    while time.time() < deadline and proc.poll() is None:
-        done, status = _steps_done(killed / "results.nc")
-        if done >= 3:
-            break
-        time.sleep(0.05)
-    os.kill(proc.pid, signal.SIGKILL)
-    proc.wait()
-    assert _lock_free(killed)
-    done, status = _steps_done(killed / "results.nc")
-    assert 3 <= done <= 24                                  # a valid file of complete steps
-    saved = open_results(killed / "results.nc")
-    assert saved.step.values.tolist() == list(range(done))
-    if status == "running":
-        resumed = subprocess.run([*cmd, "-o", str(killed), "--resume"], capture_output=True)
-        assert resumed.returncode == 0, resumed.stderr
-    else:                                                   # it had finished: nothing lost
-        assert status == "complete" and done == 24
-    straight = subprocess.run([*cmd, "-o", str(tmp_path / "straight")], capture_output=True)
-    assert straight.returncode == 0, straight.stderr
-    a = open_results(killed / "results.nc")
-    b = open_results(tmp_path / "straight" / "results.nc")
-    timers = [v for v in a.data_vars if v.startswith("time_")]
-    assert a.drop_vars(timers).identical(b.drop_vars(timers))
-    assert np.array_equal(a.pressure.values, b.pressure.values)
-
-
 def test_the_asymmetric_grain_example_turns_about_an_oblique_axis(tmp_path):
     """The bundled mesh example (copied with its mesh file), coarsened to run in seconds: it
     turns at first contact about an axis that is neither x nor y, and the orientation figure
@@ -205,6 +133,7 @@ def test_the_asymmetric_grain_example_turns_about_an_oblique_axis(tmp_path):
     assert (out / "orientation.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_without_a_terminal_a_run_prints_plain_progress_lines(tmp_path):
     """Through a pipe (as in a SLURM log or under nohup): one line per step at most, the first
     and the last always, each with the step, its load and state, the time elapsed (and left);

@@ -59,6 +59,7 @@ def _partial_run(tmp_path: Path, config: Path) -> Path:
         run_to_file(sim, out / "results.nc", progress=stop)
     return out
 
+@pytest.mark.slow
 def test_resume_with_other_inputs_touches_nothing(tmp_path):
     config = tmp_path / "c.toml"
     config.write_text(SMALL)

@@ -250,6 +250,7 @@ def _fastest(open_once, repeat=5) -> float:
     return min(times)
 
 
+@pytest.mark.slow
 def test_an_unfinished_file_opens_as_fast_as_a_finished_one(tmp_path):
     """xarray opens an unfinished results file (growing dimensions) about as fast as the same
     steps written whole, and within a small multiple of h5netcdf reading its step count. Before, the
