@@ -1298,16 +1298,31 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
 
 def _first_gap(problem: _Problem, h: float) -> float:
     """A first plate gap under force control: the given one if the upper plate presses some
-    particle, else the top of the cluster less a Hertz estimate of two approaches under F_N."""
-    top = max(float(b.centre[2] + b.shape.highest_point(b.rotation)[2]) for b in problem.start)
+    particle, else the gap at which the particles within reach of the upper plate carry F_N
+    between them, each a Hertz contact with each plate in series (overlap top − h, half of it
+    at each plate; radius: the shape's feature length). With one particle in reach this is
+    the top less two Hertz approaches under F_N; with many it is not their sum's overload."""
+    tops = [float(b.centre[2] + b.shape.highest_point(b.rotation)[2]) for b in problem.start]
+    top = max(tops)
     if h < top:
         return h
-    tallest = max(problem.start, key=lambda b: float(b.centre[2] + b.shape.highest_point(
-        b.rotation)[2]))
-    radius = tallest.shape.feature_length
-    E_star = tallest.material.E_star
-    delta = (9.0 * problem.force**2 / (16.0 * E_star**2 * radius)) ** (1.0 / 3.0)
-    return top - 2.0 * delta
+    stiff = [4.0 / 3.0 * b.material.E_star * math.sqrt(b.shape.feature_length)
+             for b in problem.start]
+
+    def carried(gap: float) -> float:
+        return math.fsum(k * (0.5 * (t - gap)) ** 1.5 for k, t in zip(stiff, tops, strict=True)
+                         if t > gap)
+
+    tallest = tops.index(top)
+    delta = (problem.force / stiff[tallest]) ** (2.0 / 3.0)     # one plate's Hertz approach
+    low, high = top - 2.0 * delta, top          # the tallest alone carries F_N at low
+    for _ in range(60):
+        mid = 0.5 * (low + high)
+        if carried(mid) > problem.force:
+            low = mid
+        else:
+            high = mid
+    return 0.5 * (low + high)
 
 
 def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResult:
@@ -1519,11 +1534,13 @@ def wrap(result_bodies: Sequence[Body], histories: Mapping, box) -> tuple[list[B
     jumps = []
     for b in result_bodies:
         c = np.array(b.centre, dtype=float)
-        m = (math.floor(c[0] / box[0]), math.floor(c[1] / box[1]))
-        c[0] -= m[0] * box[0]
-        c[1] -= m[1] * box[1]
+        m = [math.floor(c[0] / box[0]), math.floor(c[1] / box[1])]
+        for k in (0, 1):
+            c[k] -= m[k] * box[k]
+            if c[k] >= box[k]:      # −1e-19 + L rounds to L: the particle is at 0, unmoved
+                c[k], m[k] = 0.0, m[k] + 1
         moved.append(b.moved(centre=c))
-        jumps.append(m)
+        jumps.append(tuple(m))
     out = {}
     for key, hist in histories.items():
         if len(key) == 3:
