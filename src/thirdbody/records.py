@@ -23,6 +23,9 @@ from .particle.interface import surface_approach
 from .rigid import RigidState
 from .schema import INTERFACES, STATES
 
+#: the states that count as rolling (``fraction_roll``)
+ROLLING = ("roll_upper", "roll_lower", "roll")
+
 __all__ = ["INTERFACES", "STATES", "DatasetSpec", "LayerRecord", "StepMaps", "StepRecord",
            "direction_sign", "has_maps", "map_frame", "maps_step", "orientation_label",
            "particle_record", "particle_view", "step_maps", "union_frames", "unloaded_record"]
@@ -143,7 +146,8 @@ def particle_record(k: int, step, plates, ev0, ev, kind: RigidState, balanced: b
     mu_max = max(mu.values())
     sides = ("up", "low")
     values = dict(
-        normal_force=F, **_pose(ev.rotation), **_turn(ev.rotation, start_rotation),
+        normal_force=F, plate_normal_force=(F, F), **_pose(ev.rotation),
+        **_turn(ev.rotation, start_rotation),
         state=kind.value, turned=kind is not RigidState.STICK, balanced=balanced,
         tangential_force=(float(ev.demand_force[0]), float(ev.demand_force[1])),
         demand_ratio=tuple(ratio(s, ev0.demand) for s in sides),
@@ -197,6 +201,9 @@ class LayerRecord(_Values):
     particles: list[StepRecord]
     values: dict[str, Any] = field(default_factory=dict)
     error: str | None = None
+    #: a network run's contacts in the step (rows of the ``contact`` table, each a dict of the
+    #: schema's kind "contact" variables); None for the layer model without particle contacts
+    contacts: list[dict] | None = None
 
     def __getattr__(self, name: str) -> Any:
         values = self.__dict__.get("values")
@@ -242,10 +249,14 @@ class LayerRecord(_Values):
             load_value=step.value, load_kind=step.kind, total_force=total, plate_gap=gap,
             compression=(d0 - gap) / d0, loaded=len(loaded),
             fraction_stick=sum(r.state == "stick" for r in loaded) / n,
-            fraction_roll=sum(r.state in ("roll_upper", "roll_lower") for r in loaded) / n,
+            fraction_roll=sum(r.state in ROLLING for r in loaded) / n,
             fraction_rotate=sum(r.state == "rotate" for r in loaded) / n,
+            fraction_slide=sum(r.state == "slide" for r in loaded) / n,
             plate_force=(float(fx), float(fy)), plate_moment=(float(mx), float(my)),
             share_error=share_error, time_total=time_total)
+        for var in schema.by_kind("step"):          # the network's, for this model: blank
+            if var.derive is None and var.name not in values:
+                values[var.name] = var.blank()
         for var in schema.VARIABLES.values():
             if var.derive is None:
                 continue
@@ -431,6 +442,12 @@ class DatasetSpec:
         for name, values in _events(records).items():
             var = schema.VARIABLES[name]
             data[name] = (var.dims, var.array(values, (len(values),)), var.attrs)
+        network = [r for r in records if getattr(r, "contacts", None) is not None]
+        if network:
+            rows = [row for r in network for row in r.contacts]
+            for var in schema.by_kind("contact"):
+                data[var.name] = (var.dims, var.array([row[var.name] for row in rows],
+                                                      (len(rows),)), var.attrs)
         static = {"x0": layer.positions[:, 0], "y0": layer.positions[:, 1],
                   "size": [p.particle.shape.size for p in layer],
                   "cell_size": self.cell_sizes,
@@ -443,7 +460,7 @@ class DatasetSpec:
                      _dim_attrs("step")),
             "particle": ("particle", np.arange(n), _dim_attrs("particle")),
         }
-        for d in ("interface", "component", "quaternion_component"):
+        for d in ("interface", "component", "quaternion_component", "xyz"):
             coords[d] = (d, list(schema.DIMENSIONS[d].labels), _dim_attrs(d))
         stored = [(maps_step(m_list), m_list) for m_list in maps if has_maps(m_list)]
         if stored:

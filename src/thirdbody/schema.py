@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BEHAVIOURS", "COMPONENTS", "DIMENSIONS", "EVENTS", "FORMAT_VERSION", "INTERFACES",
-           "PARAMETERS", "STATES", "VARIABLES", "Dimension", "Variable", "by_kind",
-           "markdown_table", "parameter_units", "variable"]
+__all__ = ["BEHAVIOURS", "COMPONENTS", "CONTACT_STATES", "DIMENSIONS", "EVENTS",
+           "FORMAT_VERSION", "INTERFACES", "PARAMETERS", "STATES", "VARIABLES", "XYZ", "Dimension",
+           "Variable", "by_kind", "markdown_table", "parameter_units", "variable"]
 
 #: the results file layout this version writes (``thirdbody_format`` attribute); version 1 (no
 #: attribute) had no ``particle`` dimension for a single particle and maps on metres for one
@@ -34,13 +34,16 @@ __all__ = ["BEHAVIOURS", "COMPONENTS", "DIMENSIONS", "EVENTS", "FORMAT_VERSION",
 FORMAT_VERSION = 2
 
 #: what a particle did in a step (``state``), in code order
-STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded")
+STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded", "roll", "slide")
 #: what the event table records (``event_kind``)
 EVENTS = ("loaded", "unloaded", "roll_upper", "roll_lower", "rotate", "rolled_off")
 #: a sweep case's behaviour over its run (``behaviour``), in code order
 BEHAVIOURS = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "error", "missing")
 INTERFACES = ("upper", "lower")
 COMPONENTS = ("x", "y")
+XYZ = ("x", "y", "z")
+#: what a contact of a network run did in a step (``contact_state``)
+CONTACT_STATES = ("stick", "slide")
 QUATERNION = ("x", "y", "z", "w")
 
 
@@ -65,6 +68,8 @@ DIMENSIONS: dict[str, Dimension] = {d.name: d for d in (
     Dimension("map_j", "cell index along y from the particle's centroid"),
     Dimension("map_i", "cell index along x from the particle's centroid"),
     Dimension("event", "event index (step, then particle order)"),
+    Dimension("contact", "contact index of a network run (step, then contact key order)"),
+    Dimension("xyz", "3-D vector component", XYZ),
     Dimension("case", "a sweep's axes (one dimension per swept key)"),
 )}
 
@@ -111,7 +116,8 @@ class Variable:
     @property
     def kind(self) -> str:
         """"step" (one value per step: the layer's), "particle" (per step and particle),
-        "static" (per particle), "map", "event" or "summary" (per sweep case)."""
+        "static" (per particle), "map", "event", "contact" (a network run's contact table) or
+        "summary" (per sweep case)."""
         d = self.dims
         if d[:1] == ("map_step",):
             return "map"
@@ -123,6 +129,8 @@ class Variable:
             return "static"
         if d[:1] == ("event",):
             return "event"
+        if d[:1] == ("contact",):
+            return "contact"
         if d[:1] == ("case",):
             return "summary"
         raise ValueError(f"variable {self.name}: no kind for dimensions {d}")
@@ -130,7 +138,8 @@ class Variable:
     @property
     def tail(self) -> tuple[str, ...]:
         """The dimensions of one record's value: those after ``step`` (and ``particle``)."""
-        lead = {"particle": 2, "step": 1, "static": 1, "event": 1, "summary": 1, "map": 2}
+        lead = {"particle": 2, "step": 1, "static": 1, "event": 1, "summary": 1, "map": 2,
+                "contact": 1}
         return self.dims[lead[self.kind]:]
 
     @property
@@ -200,6 +209,21 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("plate_moment", "step component", "N m",
        "tilting moment of the particles' forces on the upper plate, about the origin on the "
        "lower plate"),
+    _v("fraction_slide", "step", "1", "network runs: fraction of the loaded particles whose "
+                                      "contacts all slid", summary=True),
+    _v("particle_contacts", "step", "1", "network runs: number of particle-particle contacts "
+                                         "carrying load", dtype="int64", fill=0, summary=True),
+    _v("coordination", "step", "1",
+       "network runs: mean number of contacts of a loaded particle (a particle-particle "
+       "contact counts for both particles, a plate contact once)", summary=True),
+    _v("both_plates_force", "step", "N",
+       "network runs: the part of F_N carried by particles touching both plates (the upper "
+       "plate's normal force on them)"),
+    _v("network_residual", "step", "1",
+       "network runs: the largest residual of the step's equilibrium (forces over the mean "
+       "contact force, moments over it times the particle's size, the plate force over F_N)"),
+    _v("network_iterations", "step", "1", "network runs: BEM passes over every contact in the "
+                                          "step", dtype="int64", fill=0),
     _v("share_error", "step", "1", "largest error of a particle's share of F_N accepted by the "
                                    "load sharing in the step (converged: <= 1e-7)"),
     _v("time_total", "step", "s", "wall time of the step"),
@@ -207,6 +231,10 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("normal_force", _P, "N", "normal force on the particle from each plate", fill=0.0,
        summary=True),
     _v("load_share", _P, "1", "the particle's share of F_N", fill=0.0),
+    _v("plate_normal_force", _PI, "N", "normal force of each plate on the particle (network "
+                                       "runs; otherwise both equal normal_force)", fill=0.0),
+    _v("translation", f"{_P} xyz", "m", "network runs: displacement of the centroid in the "
+                                        "step"),
     _v("quaternion", f"{_P} quaternion_component", "1",
        "orientation at the end of the step: unit quaternion (x, y, z, w), body to world"),
     _v("orientation", _PC, "degree",
@@ -276,6 +304,33 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("event_kind", "event", "1", "one of " + ", ".join(EVENTS), dtype="str"),
     _v("event_value", "event", "N or degree",
        "the normal force when loaded or unloaded (N); the angle turned (degree)"),
+    # --- a network run's contacts (one row per contact and step) ----------------------------
+    _v("contact_step", "contact", "1", "load step of the contact", dtype="int64"),
+    _v("contact_i", "contact", "1", "the contact's first particle", dtype="int64"),
+    _v("contact_j", "contact", "1",
+       "the other particle, or -1 for the lower plate and -2 for the upper plate",
+       dtype="int64"),
+    _v("contact_image", "contact component", "1",
+       "periodic image of particle j that touches i: j's centre + (m_x L_x, m_y L_y)",
+       dtype="int64", fill=0),
+    _v("contact_normal", "contact xyz", "1", "unit normal from particle i to j (or the plate)"),
+    _v("contact_force", "contact xyz", "N", "force of the contact on particle i (on j: the "
+                                            "opposite)"),
+    _v("contact_normal_force", "contact", "N", "normal force of the contact (>= 0)"),
+    _v("contact_point", "contact xyz", "m", "pressure centroid of the contact (world frame; "
+                                            "particle i's side of the box)"),
+    _v("contact_approach", "contact", "m", "approach of the two surfaces from first touch"),
+    _v("contact_total_area", "contact", "m2", "contact area (all spots)"),
+    _v("contact_stick_area", "contact", "m2", "stick area"),
+    _v("contact_spots", "contact", "1", "number of separate contact spots", dtype="int64"),
+    _v("contact_slip", "contact xyz", "m", "mean slip of j over i in the step over the "
+                                           "slipping cells (0 if none)"),
+    _v("contact_state", "contact", "1", "stick (some cells stick) or slide", dtype="int8",
+       flags=CONTACT_STATES, fill="slide"),
+    _v("contact_half_space_ratio", "contact", "1",
+       "contact radius over the smallest radius of curvature of the two surfaces (the "
+       "half-space approximation's measure)"),
+    _v("contact_mu", "contact", "1", "friction coefficient of the contact"),
     # --- maps --------------------------------------------------------------------------------
     _v("pressure", "map_step particle interface map_j map_i", "Pa", "contact pressure",
        fill=0.0),

@@ -124,6 +124,20 @@ class Simulation:
         Processes that turn the particles of a layer in parallel (the turns of one round are
         independent: each holds the others as they were at the round's start); 1 runs
         everything in this process. The results do not depend on it.
+    mu_pp : float, optional
+        Friction coefficient between particles (>= 0). Given, the particles may touch each
+        other: every load step is the equilibrium of the contact network, every contact
+        (particle-plate and particle-particle) resolved by the BEM
+        (:mod:`thirdbody.network.run`, docs/methods/network.md); the results gain the
+        ``contact`` table. Not given (the default), the paper's layer model: particles share
+        the plates' load but may not touch (a touch ends the run).
+    box : (L_x, L_y), optional
+        With ``mu_pp``: a periodic box in x and y, m, centred on the origin (the layer's
+        centroids inside it); contacts act across its sides.
+    network_tol : float
+        With ``mu_pp``: the equilibrium tolerance of each step (the largest force residual over
+        the mean contact force, moments over it times the particle's size, the plate force over
+        F_N). ``tol`` stays the BEM solvers' tolerance.
     """
 
     #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
@@ -133,7 +147,9 @@ class Simulation:
                  resolution: float = 80.0, cell_size: float | None = None,
                  tol: float = 1e-8, angle_step_deg: float = 1.0, angle_tol_deg: float = 0.01,
                  maps_every: int = 5, classification: str = "statics",
-                 twist_tol: float = 1e-3, workers: int = 1, coupling: bool = False) -> None:
+                 twist_tol: float = 1e-3, workers: int = 1, coupling: bool = False,
+                 mu_pp: float | None = None, box: tuple[float, float] | None = None,
+                 network_tol: float = 1e-6) -> None:
         from ._validate import positive, real
 
         if isinstance(particle, Layer):
@@ -196,6 +212,27 @@ class Simulation:
                                       self.d0)
         self._pool = None
         self.sharing.share_error = 0.0
+        self.mu_pp, self.box, self.network = None, None, None
+        if mu_pp is None and box is not None:
+            raise ValueError("box (network.box) needs mu_pp (network.mu_pp): a periodic box is "
+                             "a property of a network of touching particles")
+        if mu_pp is not None:
+            from .network.run import NetworkEngine
+
+            self.mu_pp = real("mu_pp (network.mu_pp, friction between particles)", mu_pp,
+                              "[0, inf)", lambda x: x >= 0)
+            if box is not None:
+                box = tuple(positive("box (network.box, m)", v) for v in box)
+                if len(box) != 2:
+                    raise ValueError(f"box (network.box) must be two lengths (L_x, L_y) in m, "
+                                     f"got {box!r}")
+            self.box = box
+            self.network_tol = positive("network_tol (network.tol)", network_tol)
+            if coupling:
+                raise ValueError("coupling (numerics.coupling) is not available with mu_pp "
+                                 "(network.mu_pp): the network's contacts are uncoupled")
+            self.network = NetworkEngine(self.layer, plates, self.mu_pp, box, cells,
+                                         self.network_tol, self.tol, self.d0)
         self.records: list = []
         self.maps: list = []
         self.status = "not run"
@@ -238,6 +275,8 @@ class Simulation:
             "maps_every": self.maps_every, "classification": self.classification,
             "twist_tol": self.twist_tol, "d0": self.d0,
             **({"coupling": 1} if self.coupling else {}),
+            **({"mu_pp": self.mu_pp, "network_tol": self.network_tol} if self.network else {}),
+            **({"box": list(self.box)} if self.box is not None else {}),
         }
         if self.single:
             return {**self._particle_inputs(self.particle), **common}
@@ -255,7 +294,8 @@ class Simulation:
 
     def preflight(self) -> int:
         """Solve the largest load at the initial orientations once and check the resolution.
-        Returns the smallest checked contact's extent in cells.
+        Returns the smallest checked contact's extent in cells (a network run, with ``mu_pp``:
+        nothing is solved beforehand, 0).
 
         Raises ValueError (naming ``resolution``) when a contact at the largest load spans
         fewer than :attr:`MIN_CONTACT_CELLS` cells: the solution would not be resolved. In a
@@ -263,6 +303,10 @@ class Simulation:
         are checked.
         Raises :class:`SimulationError` when that load cannot be solved at all.
         """
+        if self.network is not None:
+            # a network's load path is not one particle's: its contacts are not known before
+            # the steps are solved (the cluster solver checks each contact as it solves it)
+            return 0
         step = max(self.schedule, key=lambda s: s.value)
         state = self._initial_state()           # a throwaway: the run starts afresh
         for m, s in zip(self.members, state.particles, strict=True):
@@ -303,7 +347,9 @@ class Simulation:
                 f"at least {needed:.0f}")
         return int(smallest)
 
-    def _initial_state(self) -> LayerState:
+    def _initial_state(self):
+        if self.network is not None:
+            return self.network.initial_state()
         return LayerState([ParticleState(p.particle.orientation) for p in self.layer])
 
     def step(self, k: int, state: LayerState):
@@ -313,6 +359,8 @@ class Simulation:
         Raises on failure; a step that ends with two particles touching returns its record
         with ``error`` set (the run then stops)."""
         step = self.schedule[k]
+        if self.network is not None:
+            return self.network.step(k, step, state), None
         n = len(self.members)
         t_start = time.perf_counter()
         self.sharing.share_error = 0.0

@@ -35,8 +35,12 @@ def step_text(record) -> str:
     v = record.values
     counts = Counter(r.state for r in particles if r.state != "unloaded")
     states = ", ".join(f"{n} {state}" for state, n in sorted(counts.items()))
+    network = ""
+    if getattr(record, "contacts", None) is not None:       # particles that may touch
+        network = (f"; {v['particle_contacts']} particle contacts, coordination "
+                   f"{v['coordination']:.2f}")
     return (f"step {record.step}: F_N {v['total_force']:.4g} N, {v['loaded']} of "
-            f"{len(particles)} loaded" + (f": {states}" if states else ""))
+            f"{len(particles)} loaded" + (f": {states}" if states else "") + network)
 
 
 class Progress:

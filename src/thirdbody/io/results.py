@@ -6,10 +6,10 @@ at most the step in progress. Each save goes to a temporary file that then repla
 file atomically (``os.replace``). The first step a process saves is written whole; every
 later one is *appended*: the file is copied (a byte copy, about 1 ms per MB) and the new
 step's rows are written at the end of its unlimited dimensions (``step``, ``map_step``,
-``event``). The maps sit on a lattice window with room to grow; when a contact outgrows it,
-the window is enlarged in place (with room to spare again, so this happens a few times per
-run). While a run goes on, the maps of the file can therefore sit on a larger window than the
-finished file's, padded with zeros (no contact).
+``event``, a network run's ``contact``). The maps sit on a lattice window with room to grow;
+when a contact outgrows it, the window is enlarged in place (with room to spare again, so this
+happens a few times per run). While a run goes on, the maps of the file can therefore sit on a
+larger window than the finished file's, padded with zeros (no contact).
 
 While a run is incomplete the file also holds what ``--resume`` needs: ``_resume_state`` (the
 pickled solver state, of a size that does not grow with the run) and ``_resume_step`` (each
@@ -42,7 +42,7 @@ __all__ = ["RESUME_VARIABLE", "STEP_HISTORY_VARIABLE", "open_results", "run_to_f
 RESUME_VARIABLE = "_resume_state"
 STEP_HISTORY_VARIABLE = "_resume_step"
 #: dimensions that grow as the run goes on (unlimited in an unfinished file)
-_GROWING = ("step", "map_step", "event", "resume_bytes", "map_j", "map_i")
+_GROWING = ("step", "map_step", "event", "contact", "resume_bytes", "map_j", "map_i")
 #: the maps' lattice dimensions (y, x)
 _MAP_DIMS = ("map_j", "map_i")
 #: the maps' metre coordinates, on (particle, lattice dimension)
@@ -300,6 +300,8 @@ class _StepWriter:
             rows["map_step"] = np.arange(tail.sizes["map_step"])
         if "event" in tail.dims:
             rows["event"] = np.flatnonzero(tail["event_step"].values == record.step)
+        if "contact" in tail.dims:
+            rows["contact"] = np.flatnonzero(tail["contact_step"].values == record.step)
         shutil.copyfile(self.path, self.tmp)
         with h5py.File(self.tmp, "r+") as f:
             if self.frame != old_frame:
@@ -567,7 +569,7 @@ def _widen(fd: int) -> None:
 
 #: rows per HDF5 chunk along a growing dimension (one per map step for the maps): one chunk
 #: holds many steps, so that appending a step seldom allocates one
-_CHUNK_ROWS = {"step": 64, "event": 64, "resume_bytes": 1 << 14, "map_step": 1}
+_CHUNK_ROWS = {"step": 64, "event": 64, "contact": 256, "resume_bytes": 1 << 14, "map_step": 1}
 
 
 def _chunks(var) -> tuple[int, ...]:

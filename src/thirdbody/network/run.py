@@ -1,0 +1,271 @@
+"""A layer whose particles touch each other: the load steps of a run, each one equilibrium of the
+contact network (docs/methods/network.md, design notes §3c, issue 25).
+
+:class:`~thirdbody.Simulation` uses this engine when it is given ``mu_pp`` (the friction
+coefficient between particles; the ``[network]`` table of a configuration file). Each load step
+is one :func:`~thirdbody.network.cluster.solve_cluster` from the poses, contact histories and
+plate gap the last step left (:class:`NetworkState`, which is all a checkpoint holds), and its
+result becomes the step's :class:`~thirdbody.records.LayerRecord`: the plates' totals, every
+particle's variables (pose, turn, plate forces and contacts, state) and a row of the ``contact``
+table per contact (:mod:`thirdbody.schema`, kind "contact").
+
+Conventions as in :mod:`~thirdbody.network.cluster`: SI units, the lower plate at z = 0 and the
+upper one at z = h. Horizontal positions in the records are the layer's (``x0``, ``y0`` as
+placed, ``position`` the centroid's displacement since, not wrapped into a periodic box);
+``contact_point`` is on particle i's side of the box in the layer's coordinates.
+
+What a particle did (``state``): "unloaded" when it touches nothing; "stick" when every contact
+has stick cells and it did not turn; "roll_upper" / "roll_lower" when it touches only the plates
+and rolls about the one whose contact sticks while the other slides, "rotate" when both of them
+slide (the paper's states, eqs 4-5); "roll" (some contacts stick, others slide, or all stick
+while it turns) and "slide" (every contact slides) for a particle touching other particles.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .. import schema
+from ..loading import LoadStep
+from ..records import LayerRecord, StepRecord, _particle_names, _pose, _turn
+from .body import Body
+from .cluster import ClusterNumerics, ClusterResult, solve_cluster, wrap
+
+__all__ = ["NetworkEngine", "NetworkState"]
+
+#: ``contact_j`` of a plate contact
+PLATE_INDEX = {"lower": -1, "upper": -2}
+
+
+@dataclass
+class NetworkState:
+    """What a network run carries from one step to the next (a checkpoint is this).
+
+    Attributes
+    ----------
+    bodies : list of Body
+        Every particle at its pose at the end of the last step (in a periodic box: wrapped
+        into [0, L_x) x [0, L_y)).
+    histories : dict
+        The contact histories (:attr:`ClusterResult.histories`).
+    gap : float or None
+        The plate gap at the end of the last step, m (None before the first step).
+    displacement : (n, 3) array
+        Each centroid's displacement since the start of the run, m (not wrapped).
+    """
+
+    bodies: list
+    histories: dict = field(default_factory=dict)
+    gap: float | None = None
+    displacement: np.ndarray | None = None
+
+
+class NetworkEngine:
+    """The load steps of a layer of touching particles.
+
+    Parameters
+    ----------
+    layer : Layer
+        The particles at their initial poses, resting on the lower plate.
+    plates : Plates
+        μ_up and μ_low.
+    mu_pp : float, mapping or callable
+        Friction between particles (:func:`solve_cluster`).
+    box : (L_x, L_y), optional
+        A periodic box, m: the layer's centroids must lie in [−L_x/2, L_x/2) x [−L_y/2, L_y/2)
+        (where :meth:`Layer.random` places them).
+    cells : list of float
+        Each particle's BEM cell size, m.
+    tol : float
+        Equilibrium tolerance of each step (:attr:`ClusterNumerics.tol`).
+    solver_tol : float
+        Tolerance of the BEM solves.
+    d0 : float
+        The gap at which the tallest particle first touches, m (compression control).
+    """
+
+    def __init__(self, layer, plates, mu_pp, box, cells: list[float], tol: float,
+                 solver_tol: float, d0: float) -> None:
+        self.layer, self.plates, self.mu_pp = layer, plates, mu_pp
+        self.d0 = d0
+        self.box = None if box is None else (float(box[0]), float(box[1]))
+        # the cluster's coordinates: the layer's, moved so that a box starts at the origin
+        self.origin = np.zeros(3) if self.box is None else np.array(
+            [-self.box[0] / 2, -self.box[1] / 2, 0.0])
+        if self.box is not None:
+            xy = layer.positions
+            inside = ((xy >= -np.array(self.box) / 2) & (xy < np.array(self.box) / 2)).all(1)
+            if not inside.all():
+                i = int(np.flatnonzero(~inside)[0])
+                raise ValueError(
+                    f"box (network.box) = ({self.box[0]:.4g}, {self.box[1]:.4g}) m: particle {i} "
+                    f"at ({xy[i, 0]:.4g}, {xy[i, 1]:.4g}) m lies outside it (centroids must lie "
+                    f"in [-L/2, L/2) on each axis)")
+        self.numerics = ClusterNumerics(cell_size=list(cells), tol=tol, solver_tol=solver_tol)
+
+    def initial_state(self) -> NetworkState:
+        """Every particle at its initial orientation, resting on the lower plate."""
+        bodies = []
+        for placed in self.layer:
+            p = placed.particle
+            rotation = p.orientation
+            lift = -float(p.shape.lowest_point(rotation)[2])
+            centre = np.array([placed.xy[0], placed.xy[1], lift]) - self.origin
+            bodies.append(Body(p.shape, p.material, rotation, centre))
+        return NetworkState(bodies, {}, None, np.zeros((len(bodies), 3)))
+
+    def step(self, k: int, step: LoadStep, state: NetworkState) -> LayerRecord:
+        """Solve load step ``k`` from ``state`` (replaced in place by the step's end). Raises
+        :class:`~thirdbody.network.cluster.ClusterConvergenceError` (or ValueError for bad
+        geometry) when the step cannot be solved; ``state`` is then unchanged."""
+        t0 = time.perf_counter()
+        if step.kind == "force":
+            load = {"force": step.value, "gap_start": state.gap}
+        else:
+            load = {"gap": self.d0 * (1.0 - step.value)}
+        result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
+                               mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
+                               numerics=self.numerics, **load)
+        starts = [b.rotation for b in state.bodies]
+        bodies, histories = list(result.bodies), dict(result.histories)
+        if self.box is not None:
+            bodies, histories = wrap(bodies, histories, self.box)
+        displacement = state.displacement + result.translation
+        record = self._record(k, step, result, starts, displacement,
+                              time.perf_counter() - t0)
+        state.bodies, state.histories, state.gap = bodies, histories, result.gap
+        state.displacement = displacement
+        return record
+
+    # --- the step's records ------------------------------------------------------------------
+    def _record(self, k: int, step: LoadStep, result: ClusterResult, starts, displacement,
+                seconds: float) -> LayerRecord:
+        n = len(result.bodies)
+        plate = {i: {} for i in range(n)}
+        degree = [0] * n
+        for c in result.contacts:
+            if c.normal_force <= 0:
+                continue
+            if isinstance(c.j, str):
+                plate[c.i][c.j] = c
+                degree[c.i] += 1
+            else:
+                degree[c.i] += 1
+                degree[c.j] += 1
+        records = []
+        for i, body in enumerate(result.bodies):
+            records.append(self._particle(k, step, i, body, result, starts[i], plate[i],
+                                          displacement[i]))
+        loaded = [i for i in range(n) if records[i].state != "unloaded"]
+        m = max(len(loaded), 1)
+        both = [i for i in loaded if "upper" in plate[i] and "lower" in plate[i]]
+        pairs = [c for c in result.contacts if not isinstance(c.j, str) and c.normal_force > 0]
+        total = result.normal_force
+        for r in records:
+            r.values["load_share"] = r.normal_force / total if total > 0 else 0.0
+        states = [records[i].state for i in loaded]
+        values = dict(
+            load_value=step.value, load_kind=step.kind, total_force=total,
+            plate_gap=result.gap, compression=(self.d0 - result.gap) / self.d0,
+            loaded=len(loaded),
+            fraction_stick=states.count("stick") / m,
+            fraction_roll=sum(s in ("roll_upper", "roll_lower", "roll") for s in states) / m,
+            fraction_rotate=states.count("rotate") / m,
+            fraction_slide=states.count("slide") / m,
+            particle_contacts=len(pairs),
+            coordination=(math.fsum(degree[i] for i in loaded) / len(loaded)
+                          if loaded else math.nan),
+            both_plates_force=math.fsum(plate[i]["upper"].normal_force for i in both),
+            # the particles' force on the upper plate: the lower plate's on them at balance
+            plate_force=(float(-result.plate_force[0]) + 0.0,
+                         float(-result.plate_force[1]) + 0.0),
+            plate_moment=schema.VARIABLES["plate_moment"].blank(),
+            network_residual=result.residual, network_iterations=result.iterations,
+            share_error=0.0, time_total=seconds)
+        for var in schema.by_kind("step"):
+            if var.derive is not None:
+                values[var.name] = var.derive(values)
+        for var in schema.by_kind("particle"):
+            if var.derive is not None:
+                for r in records:
+                    r.values[var.name] = var.derive(r.values)
+        rows = [self._row(k, c) for c in result.contacts]
+        return LayerRecord(k, step.kind, records, values, contacts=rows)
+
+    def _particle(self, k: int, step: LoadStep, i: int, body: Body, result: ClusterResult,
+                  start, plate: dict, displacement) -> StepRecord:
+        values = {name: schema.VARIABLES[name].blank() for name in _particle_names()}
+        kind = result.kinematics[i]
+        sides = ("upper", "lower")
+        mu = {"upper": self.plates.mu_up, "lower": self.plates.mu_low}
+        others = [c for c in result.contacts_of(i)
+                  if not isinstance(c.j, str) and c.normal_force > 0]
+        state = {"free": "unloaded", "stick": "stick"}.get(kind)
+        if state is None:
+            up, low = plate.get("upper"), plate.get("lower")
+            if others or up is None or low is None:
+                state = "roll" if kind == "roll" else "slide"
+            elif kind == "slide":
+                state = "rotate"
+            elif up.state == "stick" and low.state == "slide":
+                state = "roll_upper"
+            elif low.state == "stick" and up.state == "slide":
+                state = "roll_lower"
+            else:
+                state = "roll"
+        turn = _turn(body.rotation, start)
+        values.update(**_pose(body.rotation), **turn, state=state,
+                      turned=bool(np.linalg.norm(result.rotation[i])
+                                  > self.numerics.stick_rotation),
+                      position=(float(displacement[0]), float(displacement[1])),
+                      centroid_height=float(body.centre[2]),
+                      translation=tuple(float(v) for v in result.translation[i]))
+        if state == "unloaded":
+            return StepRecord(k, step.kind, values, gap=result.gap)
+
+        def per_side(get, blank):
+            return tuple(get(plate[s], s) if s in plate else blank for s in sides)
+
+        forces = per_side(lambda c, s: c.normal_force, 0.0)
+        lower = plate.get("lower")
+        values.update(
+            normal_force=max(forces), plate_normal_force=forces,
+            tangential_force=(0.0, 0.0) if lower is None else
+            (float(lower.tangential_force[0]), float(lower.tangential_force[1])),
+            ratio=per_side(lambda c, s: float(np.linalg.norm(c.tangential_force))
+                           / (mu[s] * c.normal_force) if mu[s] > 0 else math.nan, math.nan),
+            centroid=per_side(lambda c, s: (float(c.point[0] - body.centre[0]),
+                                            float(c.point[1] - body.centre[1])),
+                              (math.nan, math.nan)),
+            approach=per_side(lambda c, s: c.approach, math.nan),
+            contact_area=per_side(lambda c, s: c.area, 0.0),
+            stick_area=per_side(lambda c, s: c.stick_area, 0.0),
+            spots=per_side(lambda c, s: c.spots, 0),
+            force_residual=float(np.linalg.norm(result.force_residual[i])) / result.force_scale,
+            moment_residual=float(np.linalg.norm(result.moment_residual[i]))
+            / (result.force_scale * body.size),
+            turn_evaluations=result.iterations)
+        return StepRecord(k, step.kind, values, gap=result.gap)
+
+    def _row(self, k: int, c) -> dict:
+        image = (0, 0) if isinstance(c.j, str) else tuple(int(v) for v in c.key[2])
+        return {
+            "contact_step": k, "contact_i": int(c.i),
+            "contact_j": PLATE_INDEX[c.j] if isinstance(c.j, str) else int(c.j),
+            "contact_image": image,
+            "contact_normal": tuple(float(v) for v in c.normal),
+            "contact_force": tuple(float(v) for v in c.force),
+            "contact_normal_force": float(c.normal_force),
+            "contact_point": tuple(float(v) for v in np.asarray(c.point) + self.origin),
+            "contact_approach": float(c.approach),
+            "contact_total_area": float(c.area), "contact_stick_area": float(c.stick_area),
+            "contact_spots": int(c.spots),
+            "contact_slip": tuple(float(v) for v in c.slip),
+            "contact_state": c.state,
+            "contact_half_space_ratio": float(c.half_space_ratio),
+            "contact_mu": float(c.mu),
+        }
