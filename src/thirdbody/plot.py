@@ -338,6 +338,8 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
         figures = {"layer_top_view": layer_top_view(ds, map_steps, layer),
                    "load_shares": load_shares(ds), "state_fractions": state_fractions(ds),
                    "particle_ratios": particle_ratios(ds)}
+        if "contact" in ds.dims:
+            figures["contact_network"] = contact_network(ds)
         return _save_figures(plt, figures, out, formats)
     ds = _one(ds)
     figures = {"state": state_curve(ds, labels), "orientation": orientation_history(ds)}
@@ -535,7 +537,7 @@ def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", 
 #: a layer particle's colour by its state in a step (the sweeps' behaviour colours)
 _STATE_COLOURS = {**{k: _BEHAVIOUR_COLOURS[k] for k in ("stick", "roll_upper", "roll_lower",
                                                          "rotate", "failed")},
-                  "unloaded": "0.75"}
+                  "unloaded": "0.75", "roll": "#937860", "slide": "#8172b3"}
 _DEFAULT_STATES = "stick roll_upper roll_lower rotate failed unloaded"
 _MARKER_AREA = 250.0            # pt²: the centroid marker of the run's largest normal force
 _OUTLINE_RAYS = 40              # rays per side of the grid sampling a mid-plane section
@@ -684,7 +686,7 @@ def layer_top_view(ds, steps: list[int] | None = None, layer=None):
                              squeeze=False, constrained_layout=True)
     outline = "circles of radius `size` (shapes not given)" if layer is None \
         else "mid-plane sections"
-    present, silhouettes = set(), False
+    present, silhouettes, network = set(), False, None
     for panel, (ax, step, k) in enumerate(zip(axes[0], steps, ks, strict=True)):
         gap = float(ds.plate_gap.values[k])
         colours = [_state_colour(names[code]) for code in state[k]]
@@ -710,6 +712,8 @@ def layer_top_view(ds, steps: list[int] | None = None, layer=None):
                         xytext=(dot + 2, dot + 2), fontsize=6, color="0.25")
         ax.scatter(cx[panel] * 1e3, cy[panel] * 1e3, s=scale * force[k], c=colours,
                    edgecolors="k", linewidths=0.5, zorder=3, gid="normal force")
+        if "contact" in ds.dims:
+            network = _force_network(ax, ds, step, cx[panel], cy[panel], network)
         c = float(ds.compression.values[k])
         ax.set_title(f"step {step}: c = {100 * c:.2f} %, $F_N$ = "
                      f"{float(ds.total_force.values[k]):.3g} N, "
@@ -734,7 +738,75 @@ def layer_top_view(ds, steps: list[int] | None = None, layer=None):
                  for f in keys]
         fig.legend(handles=sizes, loc="outside lower right", ncols=len(sizes), fontsize=8,
                    title="normal force (dot area)", title_fontsize=8, frameon=True)
+    if network:
+        fig.legend(handles=[Line2D([], [], color=_NETWORK_COLOUR, lw=_NETWORK_WIDTH,
+                                   label=f"{network:.3g} N")],
+                   loc="outside upper right", fontsize=8, title="particle contact (line width)",
+                   title_fontsize=8)
     fig.suptitle(f"top view at the mid-plane z = h/2: {_layer_title(ds)}", fontsize=10)
+    return fig
+
+
+_NETWORK_COLOUR = "#8c2d04"
+_NETWORK_WIDTH = 4.0            # pt: the line of the run's largest particle contact force
+
+
+def _force_network(ax, ds, step: int, cx: np.ndarray, cy: np.ndarray,
+                   largest: float | None) -> float:
+    """Draw the particle-particle contacts of ``step`` as lines between the centroids (cx, cy
+    in m, layer frame; across a periodic box's side to the touching image), width ∝ normal
+    force (the run's largest: :data:`_NETWORK_WIDTH`). Returns that largest force (N)."""
+    j = ds.contact_j.values
+    pair = j >= 0
+    if largest is None:
+        forces = ds.contact_normal_force.values[pair]
+        largest = float(forces.max(initial=0.0))
+    rows = np.flatnonzero(pair & (ds.contact_step.values == step)
+                          & (ds.contact_normal_force.values > 0))
+    if not len(rows) or largest <= 0:
+        return largest
+    box = _inputs(ds).get("box")
+    i = ds.contact_i.values[rows]
+    jj = j[rows]
+    image = ds.contact_image.transpose("contact", "component").values[rows].astype(float)
+    shift = image * (np.asarray(box, dtype=float) if box else 0.0)
+    start = np.column_stack([cx[i], cy[i]])
+    end = np.column_stack([cx[jj], cy[jj]]) + shift
+    if box:     # the centroids are not wrapped: the image of j nearest to i
+        L = np.asarray(box, dtype=float)
+        end = start + (end - start) - L * np.round((end - start) / L)
+    widths = _NETWORK_WIDTH * ds.contact_normal_force.values[rows] / largest
+    from matplotlib.collections import LineCollection
+
+    ax.add_collection(LineCollection(np.stack([start, end], axis=1) * 1e3, linewidths=widths,
+                                     colors=_NETWORK_COLOUR, zorder=4, capstyle="round",
+                                     gid="force network"))
+    return largest
+
+
+def contact_network(ds):
+    """A network run's contacts against the load: the coordination number (mean contacts of a
+    loaded particle) and the number of particle-particle contacts (left); the upper plate's
+    load F_N and the part of it carried by particles touching both plates (right)."""
+    plt = _plt()
+    x = ds.compression.values * 100
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10.0, 4.0), constrained_layout=True)
+    left.plot(x, ds.coordination.values, "o-", color="C0", label="coordination number")
+    left.set_xlabel("compression $(d_0 - h)/d_0$ (%)")
+    left.set_ylabel("coordination number (contacts per loaded particle)")
+    twin = left.twinx()
+    twin.plot(x, ds.particle_contacts.values, "s--", color="C1",
+              label="particle-particle contacts")
+    twin.set_ylabel("particle-particle contacts")
+    lines = left.get_lines() + twin.get_lines()
+    left.legend(lines, [ln.get_label() for ln in lines], fontsize=8, loc="upper left")
+    right.plot(x, ds.total_force.values, "o-", color="k", label="$F_N$ (all particles)")
+    right.plot(x, ds.both_plates_force.values, "s-", color="C2",
+               label="carried by particles touching both plates")
+    right.set_xlabel("compression $(d_0 - h)/d_0$ (%)")
+    right.set_ylabel("normal force of the upper plate (N)")
+    right.legend(fontsize=8)
+    fig.suptitle(f"contact network: {_layer_title(ds)}", fontsize=10)
     return fig
 
 
@@ -774,9 +846,9 @@ def load_shares(ds):
 
 
 def state_fractions(ds):
-    """What the loaded particles did in each load step: stacked bars of the fractions that
-    stuck, rolled (about either plate), rotated and failed, with the number of loaded
-    particles on the right-hand axis and the compression ratio (%) along the top."""
+    """What the loaded particles did in each load step: stacked bars of the fractions that stuck,
+    rolled (about either plate), rotated, slid (a network run) and failed, with the number of
+    loaded particles on the right-hand axis and the compression ratio (%) along the top."""
     plt = _plt()
     from matplotlib.ticker import FuncFormatter
 
@@ -789,12 +861,16 @@ def state_fractions(ds):
               else np.zeros(len(steps)))
     fractions = {name: np.nan_to_num(ds[name].values.astype(float))
                  for name in ("fraction_stick", "fraction_roll", "fraction_rotate")}
+    if "fraction_slide" in ds:          # files written before network runs have none
+        fractions["fraction_slide"] = np.nan_to_num(ds.fraction_slide.values.astype(float))
     fractions["fraction_failed"] = failed / np.maximum(ds.loaded.values, 1)
     for name, label, colour in (("fraction_stick", "stick", "stick"),
                                 ("fraction_roll", "roll", "roll_upper"),
                                 ("fraction_rotate", "rotate", "rotate"),
+                                ("fraction_slide", "slide", "slide"),
                                 ("fraction_failed", "failed", "failed")):
-        if name == "fraction_failed" and not fractions[name].any():
+        if name in ("fraction_failed", "fraction_slide") and not fractions.get(
+                name, np.zeros(1)).any():
             continue
         ax.bar(steps, fractions[name], width=0.8, bottom=bottom, color=_state_colour(colour),
                label=label, gid=name)
