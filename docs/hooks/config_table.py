@@ -61,6 +61,13 @@ MEANINGS: dict[str, str] = {
     "layer.max_tilt_deg": "largest tilt for orientation = \"tilted\"",
     "layer.seed": "the generator's seed (the same seed, the same layer)",
     "plates.mu_low": "friction coefficient of the lower plate (default: mu_up)",
+    "network.mu_pp": "friction coefficient between particles; the table makes every contact, "
+                     "particle-particle too, a BEM contact (particles may touch)",
+    "network.periodic": "x and y periodic: contacts act across the sides of the box",
+    "network.box": "the periodic box (L_x, L_y), centred on the origin (default: the [layer] "
+                   "box)",
+    "network.tol": "equilibrium tolerance of each step (force residuals over the mean contact "
+                   "force)",
     "load.program": "the load history; the keys below marked with a program apply to it",
     "load.linear_ramp.steps": "load steps",
     "load.linear_ramp.start": "first step's force (default: stop / steps)",
@@ -213,6 +220,8 @@ def config_tables() -> str:
     assert placed_only, "PlacedParticle adds the centroid"
     out += ["### `[layer]`: a generated layer", "", *HEAD, *_rows(c.LayerGenerator, "layer", used),
             ""]
+    out += ["### `[network]` (optional): particles that touch", "", *HEAD,
+            *_rows(c.Network, "network", used), ""]
     out += ["### `[plates]`", "", *HEAD, *_rows(c.Plates, "plates", used), ""]
     load = c.Config.model_fields["load"]
     out += ["### `[load]`", "", *HEAD, *_union_rows(load.annotation, "load", "program", used), ""]
@@ -222,7 +231,7 @@ def config_tables() -> str:
         raise PluginError("config_table hook: MEANINGS describes keys the configuration models "
                           f"do not have: {', '.join(stale)}")
     top = [n for n, f in c.Config.model_fields.items() if not f.exclude]
-    expected = {"particle", "particles", "layer", "plates", "load", "numerics"}
+    expected = {"particle", "particles", "layer", "network", "plates", "load", "numerics"}
     if set(top) != expected:
         raise PluginError(f"config_table hook: the configuration's tables are {sorted(top)}, "
                           f"the hook documents {sorted(expected)}: update it")

@@ -172,6 +172,7 @@ def particle_record(k: int, step, plates, ev0, ev, kind: RigidState, balanced: b
         twist_angle=-math.degrees(t["up"].twist) + 0.0,
         turn_evaluations=evaluations,
         time_normal=0.0, time_tangential=0.0, time_geometry=0.0,
+        translation=schema.VARIABLES["translation"].blank(),      # a network run's
     )
     return StepRecord(k, step.kind, values, gap=h)
 

@@ -15,7 +15,9 @@ placed, ``position`` the centroid's displacement since, not wrapped into a perio
 ``contact_point`` is on particle i's side of the box in the layer's coordinates.
 
 What a particle did (``state``): "unloaded" when it touches nothing; "stick" when every contact
-has stick cells and it did not turn; "roll_upper" / "roll_lower" when it touches only the plates
+has stick cells (it may still turn a little: a tilted particle pressed between two stuck
+contacts turns as the plates approach, about dh sin φ / |AB| for contacts A and B whose line
+leans φ from the vertical; the paper's model holds it fixed); "roll_upper" / "roll_lower" when it touches only the plates
 and rolls about the one whose contact sticks while the other slides, "rotate" when both of them
 slide (the paper's states, eqs 4-5); "roll" (some contacts stick, others slide, or all stick
 while it turns) and "slide" (every contact slides) for a particle touching other particles.
@@ -204,7 +206,12 @@ class NetworkEngine:
         mu = {"upper": self.plates.mu_up, "lower": self.plates.mu_low}
         others = [c for c in result.contacts_of(i)
                   if not isinstance(c.j, str) and c.normal_force > 0]
+        mine = [c for c in result.contacts_of(i) if c.normal_force > 0]
         state = {"free": "unloaded", "stick": "stick"}.get(kind)
+        if state is None and all(c.state == "stick" for c in mine):
+            # no contact slides: it sticks, whatever it turned (a tilted particle turns a
+            # little as the plates approach its two stuck contacts, ``rotation_angle``)
+            state = "stick"
         if state is None:
             up, low = plate.get("upper"), plate.get("lower")
             if others or up is None or low is None:

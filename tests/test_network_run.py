@@ -1,0 +1,357 @@
+"""Network runs: a layer whose particles may touch, through Simulation, the configuration, the
+results file and the figures (thirdbody.network.run; issue 25).
+
+The physics of each step is solve_cluster's (tests/test_network_cluster.py); here the checks
+are that a run carries it from step to step and writes it into the one schema, against
+references computed here: Hertz's sphere on a rigid plate, the load shares of equal spheres of
+different moduli (F_i ∝ E*_i at a common approach), the paper's layer model where nothing
+touches, and the identical particles' equal shares.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+import thirdbody as tb
+from thirdbody.io import ConfigError, parse_config
+from thirdbody.network.cluster import HalfSpaceWarning
+from thirdbody.shapes import Sphere
+
+R = 1e-3
+NU = 0.3
+MAT = tb.Material(1e9, NU)
+
+
+def _run(body, mu_pp=0.3, stop=1.0, steps=2, resolution=20, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        sim = tb.Simulation(body, tb.Plates(0.3), tb.LinearRamp(stop=stop, steps=steps),
+                            mu_pp=mu_pp, resolution=resolution, **kw)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    return sim, ds
+
+
+def hertz_gap(F: np.ndarray, E: float = 1e9) -> np.ndarray:
+    """The gap of a sphere R pressed by F between two rigid plates: 2R − 2δ, δ the Hertz
+    approach of each plate contact, δ = (9F²/(16 E*² R))^(1/3), E* = E/(1 − ν²)."""
+    E_star = E / (1 - NU**2)
+    return 2 * R - 2 * (9 * F**2 / (16 * E_star**2 * R)) ** (1 / 3)
+
+
+# --- one particle ------------------------------------------------------------------------------
+@pytest.mark.parametrize("resolution, limit", [(20, 0.03), (40, 0.003)])
+def test_a_sphere_alone_closes_the_gap_as_hertz_says_and_the_error_falls_with_the_grid(
+        resolution, limit):
+    """Measured: the approach 2δ is 2.0 % and 0.65 % off Hertz at 20 cells per radius, 0.10 %
+    and 0.19 % at 40 (0.5 N and 1 N)."""
+    _, ds = _run(tb.Particle(Sphere(R), MAT), resolution=resolution)
+    F = ds.total_force.values
+    assert F == pytest.approx([0.5, 1.0], rel=1e-9)
+    approach = 2 * R - hertz_gap(F)
+    error = np.abs(ds.plate_gap.values - hertz_gap(F)) / approach
+    assert error.max() < limit
+    assert ds.sizes["particle"] == 1
+    assert list(ds.state.values.ravel()) == [0, 0]              # stick
+    assert ds.plate_normal_force.sel(interface="upper").values.ravel() == pytest.approx(F)
+    assert ds.plate_normal_force.sel(interface="lower").values.ravel() == pytest.approx(F)
+
+
+def test_a_sphere_alone_is_the_particle_model():
+    """The network's plate contacts are the particle model's: the same gap within 1e-9 of the
+    approach (measured 6e-11) and the same pressure-centroid free sphere."""
+    sphere = tb.Particle(Sphere(R), MAT)
+    _, net = _run(sphere)
+    classic = tb.Simulation(sphere, tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=2),
+                            resolution=20).run()
+    approach = 2 * R - classic.plate_gap.values
+    assert np.abs(net.plate_gap.values - classic.plate_gap.values).max() < 1e-9 * approach.min()
+    assert net.contact_area.values == pytest.approx(classic.contact_area.values, rel=1e-9)
+
+
+def test_a_sticking_tilted_ellipsoid_is_the_particle_model_but_for_its_elastic_turn():
+    """A 1 x 0.6 x 0.5 mm ellipsoid tilted 10° about +y sticks at μ = 0.6 (F' at 0.78 μF_N).
+    Both runs say it sticks, with the same signs of F' (the lower plate's force on it) and of
+    the plates' net force. The network particle also turns as the plates approach its two stuck
+    contacts (0.25° then 0.16°; the paper's model holds it fixed), which moves its pressure
+    centroids: F' differs by 0.4 % and 1.5 % of F_N, the ratios by 1.8 % and 3.2 %, the gap by
+    2 and 3.4 µm (measured). The equilibrium at 20 cells per size stalls at a residual of 4e-5
+    (the floor of docs/methods/network.md): network_tol = 1e-4."""
+    from thirdbody.shapes import Ellipsoid
+
+    particle = tb.Particle(Ellipsoid((1e-3, 0.6e-3, 0.5e-3)), MAT, 10.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        net = tb.Simulation(particle, tb.Plates(0.6), tb.LinearRamp(stop=1.0, steps=2),
+                            mu_pp=0.6, resolution=20, network_tol=1e-4).run()
+    classic = tb.Simulation(particle, tb.Plates(0.6), tb.LinearRamp(stop=1.0, steps=2),
+                            resolution=20).run()
+    assert net.attrs["status"] == "complete"
+    assert list(net.state.values.ravel()) == list(classic.state.values.ravel()) == [0, 0]
+    F = classic.total_force.values
+    assert net.normal_force.values.ravel() == pytest.approx(F, rel=1e-4)
+    T = classic.tangential_force.values                    # (step, particle, component)
+    assert np.abs(T).max() > 0.2 * F.max()                  # a real tangential load
+    assert np.abs(net.tangential_force.values - T).max() < 0.02 * F.max()
+    assert np.abs(net.plate_force.values - classic.plate_force.values).max() < 0.02 * F.max()
+    assert net.ratio.values == pytest.approx(classic.ratio.values, rel=0.04)
+    turn = net.rotation_angle.values.ravel()
+    assert (turn > 0.05).all() and (turn < 0.5).all()
+    assert np.abs(net.plate_gap.values - classic.plate_gap.values).max() < 5e-6
+    # the lower contact's pressure centroid is where the particle's centroid (x0 + position)
+    # and its offset (centroid, particle frame) put it
+    lower = net.contact_j.values == -1
+    steps = net.contact_step.values[lower]
+    x = (net.x0.values[0] + net.position.sel(component="x").values[steps, 0]
+         + net.centroid.sel(interface="lower", component="x").values[steps, 0])
+    assert net.contact_point.values[lower, 0] == pytest.approx(x, rel=0, abs=1e-12)
+    # position is the sum of the steps' translations; the first step starts resting on the
+    # lower plate: the centroid at the ellipsoid's support height sqrt(a² sin²θ + c² cos²θ)
+    moves = net.translation.values[:, 0]                    # (step, xyz)
+    assert net.position.values[:, 0] == pytest.approx(np.cumsum(moves[:, :2], axis=0),
+                                                      rel=1e-9, abs=1e-20)
+    theta = np.radians(10.0)
+    rest = np.sqrt((1e-3 * np.sin(theta)) ** 2 + (0.5e-3 * np.cos(theta)) ** 2)
+    assert net.centroid_height.values[0, 0] - moves[0, 2] == pytest.approx(rest, rel=1e-9)
+
+
+# --- a dilute layer: nothing touches -----------------------------------------------------------
+def _moduli_layer(order):
+    mats = [tb.Material(E, NU) for E in (1e9, 2e9, 4e9)]
+    return tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(R), mats[i]), (3e-3 * i, 0.0))
+                     for i in order])
+
+
+@pytest.fixture(scope="module")
+def moduli():
+    """Three equal spheres of E = 1, 2 and 4 GPa, 1 mm apart, pressed by 1.5 N then 3 N."""
+    return _run(_moduli_layer([0, 1, 2]), stop=3.0)
+
+
+def test_distinct_particles_that_do_not_touch_share_the_load_as_hertz_says(moduli):
+    """Equal spheres at a common approach carry F_i ∝ E*_i: 1/7, 2/7 and 4/7 of F_N
+    (measured within 1.2e-8)."""
+    _, ds = moduli
+    share = ds.normal_force.values / ds.total_force.values[:, None]
+    assert share == pytest.approx(np.array([[1, 2, 4]] * 2) / 7, rel=1e-6)
+    assert ds.load_share.values == pytest.approx(np.array([[1, 2, 4]] * 2) / 7, rel=1e-6)
+    assert ds.total_force.values == pytest.approx([1.5, 3.0], rel=1e-9)
+    assert (ds.particle_contacts.values == 0).all()
+    assert ds.coordination.values == pytest.approx([2.0, 2.0])   # two plates each
+    assert ds.both_plates_force.values == pytest.approx(ds.total_force.values)
+
+
+def test_distinct_particles_that_do_not_touch_are_the_layer_model(moduli):
+    """Where nothing touches, the network run gives the layer model's states, forces (within
+    1e-6; measured 1.8e-8) and gaps (measured 8.5e-15 m)."""
+    _, net = moduli
+    classic = tb.Simulation(_moduli_layer([0, 1, 2]), tb.Plates(0.3),
+                            tb.LinearRamp(stop=3.0, steps=2), resolution=20).run()
+    assert (net.state.values == classic.state.values).all()
+    assert net.normal_force.values == pytest.approx(classic.normal_force.values, rel=1e-6)
+    assert net.plate_gap.values == pytest.approx(classic.plate_gap.values, rel=0, abs=1e-12)
+
+
+def test_permuting_the_particles_permutes_the_results_bit_for_bit(moduli):
+    _, ds = moduli
+    _, other = _run(_moduli_layer([2, 0, 1]), stop=3.0)
+    back = [1, 2, 0]                                 # other's particle k is moduli's back[k]
+    for name in ("normal_force", "plate_normal_force", "centroid_height", "quaternion",
+                 "contact_area"):
+        a = ds[name].transpose("step", "particle", ...).values
+        b = other[name].transpose("step", "particle", ...).values[:, back]
+        assert np.array_equal(a, b), name
+    assert np.array_equal(ds.plate_gap.values, other.plate_gap.values)
+
+
+# --- identical particles touching in a periodic box -------------------------------------------
+def _row():
+    """Three identical spheres in a row, each touching the next, in a periodic 6R x 4R box (the
+    third touches the first across the side)."""
+    return tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(R), MAT), (x, 0.0))
+                     for x in (-2 * R, 0.0, 2 * R)])
+
+
+@pytest.fixture(scope="module")
+def row():
+    return _run(_row(), stop=3.0, steps=3, box=(6 * R, 4 * R))
+
+
+def test_identical_touching_particles_share_the_load_bit_for_bit(row):
+    _, ds = row
+    F = ds.normal_force.values
+    assert (F == F[:, :1]).all()
+    assert F[:, 0] == pytest.approx(ds.total_force.values / 3, rel=1e-9)
+    # each is the sphere alone under F_N / 3 (Hertz at the grid's 2 % here)
+    assert ds.plate_gap.values == pytest.approx(hertz_gap(ds.total_force.values / 3), rel=1e-3)
+    assert (ds.centroid_height.values == ds.centroid_height.values[:, :1]).all()
+
+
+def test_the_contact_table_holds_every_contact_with_newtons_third_law(row):
+    """Each step lists the six plate contacts (i, -1 lower / -2 upper); the plate pushes the
+    particle away from itself with the particle's plate normal force."""
+    _, ds = row
+    steps = ds.contact_step.values
+    assert [int((steps == k).sum()) for k in ds.step.values] == [6, 6, 6]
+    for r in range(ds.sizes["contact"]):
+        k, i, j = (int(ds[v].values[r]) for v in ("contact_step", "contact_i", "contact_j"))
+        side = {-1: "lower", -2: "upper"}[j]
+        force = ds.contact_force.values[r]
+        N = float(ds.contact_normal_force.values[r])
+        assert N == pytest.approx(float(ds.plate_normal_force.sel(interface=side).values[k, i]))
+        assert force[2] == pytest.approx(N if side == "lower" else -N, rel=1e-12)
+        assert np.hypot(force[0], force[1]) <= float(ds.contact_mu.values[r]) * N
+        assert ds.contact_normal.values[r] == pytest.approx([0, 0, -1 if j == -1 else 1])
+        # the pressure centroid: under (over) the sphere's centre, on the plate
+        x = ds.x0.values[i] + ds.position.sel(component="x").values[k, i]
+        z = 0.0 if j == -1 else ds.plate_gap.values[k]
+        assert ds.contact_point.values[r] == pytest.approx([x, 0.0, z], abs=1e-9)
+        assert float(ds.contact_total_area.values[r]) > 0
+    assert ds.contact_state.attrs["flag_meanings"] == "stick slide"
+
+
+def test_a_periodic_box_must_hold_the_particles():
+    with pytest.raises(ValueError, match=r"box \(network.box\).*particle 2 at \(0.002"):
+        tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=1), mu_pp=0.3,
+                      box=(4 * R, 4 * R))
+
+
+# --- results file and resume -------------------------------------------------------------------
+def test_the_results_file_holds_the_contact_table_step_by_step_and_resumes(row, tmp_path):
+    """A run written step by step (the contact table appended) reads back as the run in
+    memory; a run resumed from its file after step 1 ends the same."""
+    from thirdbody.io import open_results, run_to_file
+
+    sim, ds = row
+    path = tmp_path / "results.nc"
+    make = lambda: tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=3.0, steps=3),  # noqa: E731
+                                 mu_pp=0.3, resolution=20, box=(6 * R, 4 * R))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        run_to_file(make(), path)
+    back = open_results(path)
+    for name in ("contact_step", "contact_i", "contact_j", "contact_force", "contact_state",
+                 "normal_force", "plate_gap", "translation", "coordination"):
+        assert np.array_equal(back[name].values, ds[name].values), name
+
+    # stop after step 1, then resume
+    first = make()
+    state = None
+    for record, _, state in first.steps():
+        first.records.append(record)
+        if record.step == 1:
+            break
+    blob = first.snapshot(state)
+    resumed = make()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        again = resumed.run(resume_from=blob)
+    for name in ("normal_force", "plate_gap", "centroid_height", "contact_force"):
+        assert np.array_equal(again[name].values, ds[name].values), name
+
+
+# --- configuration and bad input ---------------------------------------------------------------
+_BASE = {
+    "particles": [{"shape": "sphere", "radius": R, "E": 1e9, "nu": NU, "x": x, "y": 0.0}
+                  for x in (-2 * R, 0.0, 2 * R)],
+    "plates": {"mu_up": 0.3},
+    "load": {"program": "linear_ramp", "stop": 3.0, "steps": 3},
+    "numerics": {"resolution": 20.0},
+}
+
+
+def test_a_network_table_makes_a_network_run():
+    cfg = parse_config({**_BASE, "network": {"mu_pp": 0.3, "periodic": True,
+                                             "box": [6 * R, 4 * R]}})
+    body, plates, load, numerics = cfg.build()
+    assert numerics["mu_pp"] == 0.3 and numerics["box"] == (6 * R, 4 * R)
+    sim = tb.Simulation(body, plates, load, **numerics)
+    assert sim.network is not None and sim.box == (6 * R, 4 * R)
+    assert sim.inputs()["mu_pp"] == 0.3
+    # without the table: the layer model
+    assert tb.Simulation(*parse_config(_BASE).build()[:3]).network is None
+    # the TOML written back reads the same
+    again = parse_config(__import__("tomllib").loads(cfg.to_toml()))
+    assert again.network == cfg.network
+
+
+@pytest.mark.parametrize("network, match", [
+    ({"mu_pp": -0.1}, r"network\.mu_pp"),
+    ({"mu_pp": 0.3, "box": [1e-3, 1e-3]}, r"periodic = true"),
+    ({"mu_pp": 0.3, "periodic": True}, r"network\.box"),
+    ({"mu_pp": 0.3, "tol": 0.5}, r"network\.tol"),
+    ({"mu_pp": 0.3, "spam": 1}, r"network\.spam"),
+])
+def test_a_bad_network_table_names_the_key(network, match):
+    with pytest.raises(ConfigError, match=match):
+        parse_config({**_BASE, "network": network})
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"box": (1e-2, 1e-2)}, r"box \(network.box\) needs mu_pp"),
+    ({"mu_pp": -1.0}, r"mu_pp .* \[0, inf\)"),
+    ({"mu_pp": 0.3, "box": (1e-2, -1.0)}, r"box \(network.box, m\)"),
+    ({"mu_pp": 0.3, "coupling": True}, r"coupling .* mu_pp"),
+    ({"mu_pp": 0.3, "network_tol": 0.0}, r"network_tol"),
+])
+def test_bad_simulation_arguments_name_the_argument(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=1), **kwargs)
+
+
+# --- figures -----------------------------------------------------------------------------------
+def test_the_contact_network_figure_draws_the_run(row):
+    pytest.importorskip("matplotlib")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from thirdbody import plot
+
+    _, ds = row
+    fig = plot.contact_network(ds)
+    left, right = fig.axes[0], fig.axes[1]
+    x, z = left.get_lines()[0].get_data()
+    assert x == pytest.approx(100 * ds.compression.values)
+    assert z == pytest.approx(ds.coordination.values)
+    carried = [ln for ln in right.get_lines() if "both plates" in ln.get_label()][0]
+    assert carried.get_ydata() == pytest.approx(ds.both_plates_force.values)
+
+
+def test_the_top_view_draws_each_particle_contact_with_its_force(row):
+    """A pair row added to the last step's table (0-1 with 2 N, and 2-0 across the box's side
+    with 1 N): two lines, widths 4 pt and 2 pt, the second from particle 2 to particle 0's
+    image one box length to the right."""
+    pytest.importorskip("matplotlib")
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import xarray as xr
+    from matplotlib.collections import LineCollection
+
+    from thirdbody import plot
+
+    _, ds = row
+    last = int(ds.step.values[-1])
+    extra = {name: ds[name].isel(contact=[0, 0]) for name in ds.data_vars
+             if ds[name].dims[:1] == ("contact",)}
+    extra = xr.Dataset(extra)
+    extra["contact_step"][:] = last
+    extra["contact_i"][:] = [0, 2]
+    extra["contact_j"][:] = [1, 0]
+    extra["contact_normal_force"][:] = [2.0, 1.0]
+    extra["contact_image"][:] = [[0, 0], [1, 0]]
+    full = xr.concat([ds[list(extra.data_vars)], extra], dim="contact")
+    ds = ds.drop_dims("contact").merge(full)
+    fig = plot.layer_top_view(ds, steps=[last])
+    lines = [c for c in fig.axes[0].collections if isinstance(c, LineCollection)
+             and c.get_gid() == "force network"]
+    assert len(lines) == 1
+    widths = lines[0].get_linewidths()
+    assert list(widths) == pytest.approx([4.0, 2.0])
+    segments = lines[0].get_segments()
+    x = (ds.x0.values + ds.position.sel(component="x").values[-1]) * 1e3
+    assert segments[0][:, 0] == pytest.approx([x[0], x[1]])
+    assert segments[1][:, 0] == pytest.approx([x[2], x[0] + 6.0])     # the image: +6 mm
