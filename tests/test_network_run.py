@@ -225,7 +225,7 @@ def test_the_results_file_holds_the_contact_table_step_by_step_and_resumes(row, 
     memory; a run resumed from its file after step 1 ends the same."""
     from thirdbody.io import open_results, run_to_file
 
-    sim, ds = row
+    _, ds = row
     path = tmp_path / "results.nc"
     make = lambda: tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=3.0, steps=3),  # noqa: E731
                                  mu_pp=0.3, resolution=20, box=(6 * R, 4 * R))

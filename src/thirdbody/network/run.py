@@ -17,10 +17,10 @@ placed, ``position`` the centroid's displacement since, not wrapped into a perio
 What a particle did (``state``): "unloaded" when it touches nothing; "stick" when every contact
 has stick cells (it may still turn a little: a tilted particle pressed between two stuck
 contacts turns as the plates approach, about dh sin φ / |AB| for contacts A and B whose line
-leans φ from the vertical; the paper's model holds it fixed); "roll_upper" / "roll_lower" when it touches only the plates
-and rolls about the one whose contact sticks while the other slides, "rotate" when both of them
-slide (the paper's states, eqs 4-5); "roll" (some contacts stick, others slide, or all stick
-while it turns) and "slide" (every contact slides) for a particle touching other particles.
+leans φ from the vertical; the paper's model holds it fixed); "roll_upper" / "roll_lower"
+when it touches only the plates and rolls about the one whose contact sticks while the other
+slides, "rotate" when both of them slide (the paper's states, eqs 4-5); "roll" (some contacts
+stick, others slide) and "slide" (every contact slides) for a particle touching particles.
 """
 
 from __future__ import annotations
