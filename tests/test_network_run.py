@@ -239,12 +239,12 @@ def test_the_results_file_holds_the_contact_table_step_by_step_and_resumes(row, 
 
     # stop after step 1, then resume
     first = make()
-    state = None
-    for record, _, state in first.steps():
+    blob = None
+    for record, _, current in first.steps():
         first.records.append(record)
         if record.step == 1:
+            blob = first.snapshot(current)
             break
-    blob = first.snapshot(state)
     resumed = make()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HalfSpaceWarning)
