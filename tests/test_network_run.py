@@ -316,7 +316,7 @@ def test_the_contact_network_figure_draws_the_run(row):
     x, z = left.get_lines()[0].get_data()
     assert x == pytest.approx(100 * ds.compression.values)
     assert z == pytest.approx(ds.coordination.values)
-    carried = [ln for ln in right.get_lines() if "both plates" in ln.get_label()][0]
+    carried = next(ln for ln in right.get_lines() if "both plates" in ln.get_label())
     assert carried.get_ydata() == pytest.approx(ds.both_plates_force.values)
 
 
