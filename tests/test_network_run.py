@@ -355,3 +355,34 @@ def test_the_top_view_draws_each_particle_contact_with_its_force(row):
     x = (ds.x0.values + ds.position.sel(component="x").values[-1]) * 1e3
     assert segments[0][:, 0] == pytest.approx([x[0], x[1]])
     assert segments[1][:, 0] == pytest.approx([x[2], x[0] + 6.0])     # the image: +6 mm
+
+
+# --- the command line --------------------------------------------------------------------------
+def test_the_network_example_runs_from_the_command_line(tmp_path):
+    """`thirdbody run` on the bundled network example: the results file with its contact table
+    and the figures, the contact network's included; a bad [network] table is refused with exit
+    code 2 and nothing written."""
+    from typer.testing import CliRunner
+
+    from thirdbody.cli import app
+    from thirdbody.io import open_results
+
+    runner = CliRunner()
+    copied = runner.invoke(app, ["examples", "copy", "network_row", str(tmp_path)])
+    assert copied.exit_code == 0, copied.output
+    config = tmp_path / "network_row.toml"
+    out = tmp_path / "out"
+    result = runner.invoke(app, ["run", str(config), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "particle contacts, coordination 2.00" in result.output
+    ds = open_results(out / "results.nc")
+    assert ds.attrs["status"] == "complete" and ds.sizes["step"] == 4
+    assert ds.sizes["contact"] == 4 * 6
+    assert (ds.normal_force.values == ds.normal_force.values[:, :1]).all()
+    for name in ("contact_network.png", "layer_top_view.png", "state_fractions.png"):
+        assert (out / name).stat().st_size > 1000, name
+    bad = tmp_path / "bad.toml"
+    bad.write_text(config.read_text().replace("mu_pp = 0.3", "mu_pp = -0.3"))
+    refused = runner.invoke(app, ["run", str(bad), "-o", str(tmp_path / "bad")])
+    assert refused.exit_code == 2 and "network.mu_pp" in refused.output
+    assert not (tmp_path / "bad").exists()
