@@ -375,3 +375,30 @@ def test_the_network_example_runs_from_the_command_line(tmp_path, row):
     refused = runner.invoke(app, ["run", str(bad), "-o", str(tmp_path / "bad")])
     assert refused.exit_code == 2 and "network.mu_pp" in refused.output
     assert not (tmp_path / "bad").exists()
+
+
+def test_paraview_gets_the_contacts_as_lines(row, tmp_path):
+    """network_kkkk.vtu: one line per loaded contact, from the particle's centroid to the
+    pressure centroid on the plate (z = 0 or the gap), with the table's normal force; listed in
+    results.pvd as part 3."""
+    import meshio
+
+    from thirdbody.io.vtk import export_vtk
+
+    _, ds = row
+    files = export_vtk(ds, _row(), tmp_path, subdivisions=0)
+    last = int(ds.step.values[-1])
+    mesh = meshio.read(tmp_path / f"network_{last:04d}.vtu")
+    lines = mesh.cells_dict["line"]
+    rows = np.flatnonzero(ds.contact_step.values == last)
+    assert len(lines) == len(rows) == 6
+    assert mesh.cell_data["normal_force"][0] == pytest.approx(
+        ds.contact_normal_force.values[rows])
+    x = ds.x0.values + ds.position.sel(component="x").values[-1]
+    for (a, b), i, j in zip(lines, ds.contact_i.values[rows], ds.contact_j.values[rows],
+                            strict=True):
+        assert mesh.points[a] == pytest.approx([x[i], 0.0, ds.centroid_height.values[-1, i]])
+        z = 0.0 if j == -1 else float(ds.plate_gap.values[-1])
+        assert mesh.points[b] == pytest.approx([x[i], 0.0, z], abs=1e-9)
+    assert 'part="3"' in (tmp_path / "results.pvd").read_text()
+    assert any(f.name == f"network_{last:04d}.vtu" for f in files)

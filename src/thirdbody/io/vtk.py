@@ -8,9 +8,14 @@ coordinate of the results):
 * ``plates_kkkk.vtu`` — the two plates as two quads (lower then upper);
 * ``contact_kkkk.vtu`` — the contact maps of the step as patches in the plates' planes: one
   quad per map cell, at the solver's own resolution (empty in a step without stored maps);
-* ``results.pvd`` — a ParaView collection listing the three files of every step with
-  ``timestep`` = the step index, as ``part`` 0 (``particles``), 1 (``plates``) and 2
-  (``contact``): open it in ParaView to get a three-block time series.
+* ``network_kkkk.vtu`` — a network run's contacts (``[network]``, particles that touch) as
+  lines: particle to particle between their centroids, particle to plate from the centroid to
+  the pressure centroid, with the normal force, the force, the state and the kind of contact
+  as cell data (use ParaView's Tube filter, radius by ``normal_force``, for a force network);
+* ``results.pvd`` — a ParaView collection listing the files of every step with
+  ``timestep`` = the step index, as ``part`` 0 (``particles``), 1 (``plates``), 2
+  (``contact``) and, for a network run, 3 (``network``): open it in ParaView to get a
+  multi-block time series.
 
 All lengths are in metres, pressures and tractions in pascals. The files are written with
 meshio; only the small ``.pvd`` XML index is written directly.
@@ -80,6 +85,7 @@ On the plates: cell data ``plate`` (0 lower, 1 upper).
 
 from __future__ import annotations
 
+import json
 import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -334,6 +340,38 @@ def _contact_mesh(results: _Results, s: int, centre: np.ndarray) -> meshio.Mesh:
                        cell_data={name: [np.concatenate(v)] for name, v in data.items()})
 
 
+def _network_mesh(ds: xr.Dataset, step: int, centre: np.ndarray) -> meshio.Mesh:
+    """A network run's contacts of ``step`` as line cells: a particle contact from particle i's
+    centroid to the centroid of the image of j that touches it, a plate contact from the
+    particle's centroid to the contact's pressure centroid on the plate. Cell data: normal
+    force (N), the force on i (N, 3-vector), state (0 stick, 1 slide), kind (0 particle, 1 lower
+    plate, 2 upper plate) and the two ends' indices (j = −1 lower, −2 upper plate)."""
+    rows = np.flatnonzero((ds.contact_step.values == step)
+                          & (ds.contact_normal_force.values > 0))
+    i = ds.contact_i.values[rows].astype(int)
+    j = ds.contact_j.values[rows].astype(int)
+    point = ds.contact_point.transpose("contact", "xyz").values[rows]
+    box = json.loads(ds.attrs.get("inputs", "{}")).get("box")
+    start = centre[i]
+    end = point.copy()
+    pair = j >= 0
+    if pair.any():
+        end[pair] = centre[j[pair]]
+        if box:     # centroids are not wrapped: the image of j nearest to i
+            L = np.array([box[0], box[1], np.inf])
+            d = end[pair] - start[pair]
+            d[:, :2] -= L[:2] * np.round(d[:, :2] / L[:2])
+            end[pair] = start[pair] + d
+    points = np.concatenate([start, end]) if len(rows) else np.zeros((0, 3))
+    lines = np.column_stack([np.arange(len(rows)), len(rows) + np.arange(len(rows))])
+    kind = np.where(j >= 0, 0, np.where(j == -1, 1, 2)).astype(np.int8)
+    data = {"normal_force": [ds.contact_normal_force.values[rows]],
+            "force": [ds.contact_force.transpose("contact", "xyz").values[rows]],
+            "state": [ds.contact_state.values[rows].astype(np.int8)],
+            "kind": [kind], "i": [i.astype(np.int32)], "j": [j.astype(np.int32)]}
+    return meshio.Mesh(points, [("line", lines.astype(np.int64))], cell_data=data)
+
+
 def _write_pvd(path: Path, entries: list[tuple[int, int, str, str]]) -> None:
     """A ParaView collection: (timestep, part, name, file) per data set."""
     root = ET.Element("VTKFile", type="Collection", version="0.1", byte_order="LittleEndian")
@@ -452,6 +490,9 @@ def export_vtk(ds: xr.Dataset, layer: Layer, out_dir: str | Path, *,
         write(plates, f"plates_{step:04d}.vtu", step, 1, "plates")
         write(_contact_mesh(results, s, centre[s]), f"contact_{step:04d}.vtu", step, 2,
               "contact")
+        if "contact" in ds.dims:
+            write(_network_mesh(ds, step, centre[s]), f"network_{step:04d}.vtu", step, 3,
+                  "network")
 
     pvd = out_dir / COLLECTION
     _write_pvd(pvd, entries)
