@@ -60,6 +60,9 @@ MEANINGS: dict[str, str] = {
                          "max_tilt_deg; \"upright\"",
     "layer.max_tilt_deg": "largest tilt for orientation = \"tilted\"",
     "layer.seed": "the generator's seed (the same seed, the same layer)",
+    "layer.placement": "\"sequential\": one at a time, bounding discs apart (area fraction "
+                       "<= 0.5); \"relaxed\": all at once, then the discs' overlaps relaxed "
+                       "away (dense layers, <= 0.8); periodic with [network] periodic = true",
     "plates.mu_low": "friction coefficient of the lower plate (default: mu_up)",
     "network.mu_pp": "friction coefficient between particles; the table makes every contact, "
                      "particle-particle too, a BEM contact (particles may touch)",

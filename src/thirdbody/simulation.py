@@ -133,7 +133,8 @@ class Simulation:
         the plates' load but may not touch (a touch ends the run).
     box : (L_x, L_y), optional
         With ``mu_pp``: a periodic box in x and y, m, centred on the origin (the layer's
-        centroids inside it); contacts act across its sides.
+        centroids inside it); contacts act across its sides. Default: the layer's box if it
+        was generated periodic (``Layer.random(..., periodic=True)``), else none.
     network_tol : float
         With ``mu_pp``: the equilibrium tolerance of each step (the largest force residual over
         the mean contact force, moments over it times the particle's size, the plate force over
@@ -213,6 +214,8 @@ class Simulation:
         self._pool = None
         self.sharing.share_error = 0.0
         self.mu_pp, self.box, self.network = None, None, None
+        if mu_pp is not None and box is None and getattr(self.layer, "periodic", False):
+            box = self.layer.box                # Layer.random(..., periodic=True)
         if mu_pp is None and box is not None:
             raise ValueError("box (network.box) needs mu_pp (network.mu_pp): a periodic box is "
                              "a property of a network of touching particles")
