@@ -213,6 +213,14 @@ def test_the_contact_table_holds_every_contact_with_newtons_third_law(row):
     assert ds.contact_state.attrs["flag_meanings"] == "stick slide"
 
 
+def test_particles_overlapping_through_a_side_of_the_box_are_refused():
+    layer = tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(R), MAT), (x, 0.0))
+                      for x in (-2.5 * R, 0.0, 2.4 * R)])
+    with pytest.raises(ValueError, match=r"particles 0 and 2 overlap through a side"):
+        tb.Simulation(layer, tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=1), mu_pp=0.3,
+                      box=(6 * R, 4 * R))
+
+
 def test_a_periodic_box_must_hold_the_particles():
     with pytest.raises(ValueError, match=r"box \(network.box\).*particle 2 at \(0.002"):
         tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=1), mu_pp=0.3,

@@ -107,6 +107,19 @@ class NetworkEngine:
                     f"box (network.box) = ({self.box[0]:.4g}, {self.box[1]:.4g}) m: particle {i} "
                     f"at ({xy[i, 0]:.4g}, {xy[i, 1]:.4g}) m lies outside it (centroids must lie "
                     f"in [-L/2, L/2) on each axis)")
+        if self.box is not None and not (getattr(layer, "periodic", False)
+                                         and layer.box == self.box):
+            from ..layer.placement import _first_overlap_across
+
+            shapes = [p.particle.shape for p in layer]
+            rotations = [p.particle.orientation for p in layer]
+            centres = np.array([(*p.xy, -p.particle.shape.lowest_point(r)[2])
+                                for p, r in zip(layer, rotations, strict=True)])
+            hit = _first_overlap_across(shapes, rotations, centres, self.box)
+            if hit is not None:
+                raise ValueError(f"box (network.box): particles {hit[0]} and {hit[1]} overlap "
+                                 f"through a side of the periodic box (near x = {hit[2]:.4g} m, "
+                                 f"y = {hit[3]:.4g} m): move them apart or enlarge the box")
         self.numerics = ClusterNumerics(cell_size=list(cells), tol=tol, solver_tol=solver_tol)
 
     def initial_state(self) -> NetworkState:
