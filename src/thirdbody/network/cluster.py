@@ -1076,8 +1076,13 @@ def _piecewise(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: floa
     return out, plate_out, model, active, laws
 
 
-#: halvings of a step of the active-set passes towards the last one before they give up
-_MODEL_HALVINGS = 30
+#: halvings of a step of the active-set passes towards the last one before they give up: of
+#: the Newton step of the model at the last step's own branches (a descent direction of its
+#: merit), and of a step from other branches (the start's)
+_MODEL_HALVINGS, _OTHER_HALVINGS = 30, 8
+#: the active-set passes stop when the model's merit is this share of its value at a zero step
+#: (its residuals 1e-7 of theirs: the model's root, well below what the BEM will follow)
+_MODEL_ROOT = 1e-14
 
 
 def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: float,
@@ -1097,7 +1102,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
     groups = _components(n, terms)
     step, dh = np.zeros((n, 6)), 0.0
     out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate, step, dh)
-    merit = _merit(problem, out, plate_out, scale, translate)
+    merit = start_merit = _merit(problem, out, plate_out, scale, translate)
     # a sliding contact starts on its stick branch (the elastic predictor from the start of
     # the step): on the slide branch it has no stiffness along its slip, so a particle whose
     # only way out is to roll back (a sphere under a plate that moved by more than the slip
@@ -1118,7 +1123,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
                                    R, plate, translate)
     for _ in range(2 * _ACTIVE_SET_PASSES):
         t = 1.0
-        for _halving in range(_MODEL_HALVINGS + 1):
+        for _halving in range((_MODEL_HALVINGS if own else _OTHER_HALVINGS) + 1):
             cand = step + t * (trial - step)
             cand_dh = dh + t * (trial_dh - dh)
             out, plate_out, cand_model, cand_active, cand_laws = _piecewise(
@@ -1139,6 +1144,8 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
         model, active, laws = cand_model, cand_active, cand_laws
         if t == 1.0 and cand_active == used[0] and _same(cand_laws, used[1]):
             break           # the step's own branches: the piecewise model's root
+        if merit <= _MODEL_ROOT * start_merit:
+            break           # the piecewise model's root to rounding
         used, own = (cand_active, cand_laws), True
         trial, trial_dh = _solve_model(problem, cand_model, groups, R, plate, translate)
     return step, dh, model, active

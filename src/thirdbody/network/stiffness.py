@@ -48,6 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -221,6 +222,20 @@ class ContactModel:
         return np.hstack([-_I, skew(ra), _I, -skew(rb)])
 
     def approach_row(self) -> np.ndarray:
+        """dδ (12,) (:attr:`_approach_row`; computed once per model, not to be modified)."""
+        return self._approach_row
+
+    def tangential_rows(self) -> np.ndarray:
+        """The shift increment's change (3, 12) (:attr:`_tangential_rows`; computed once per
+        model, not to be modified)."""
+        return self._tangential_rows
+
+    def _geometry(self):
+        """(ξ, dn, dr_a, dr_b) (:attr:`_geometry_rows`; computed once per model)."""
+        return self._geometry_rows
+
+    @cached_property
+    def _approach_row(self) -> np.ndarray:
         """dδ (12,): the relative normal motion at the point of first touch (``touch``, the
         closest points of the undeformed surfaces; the pressure centroid if not given): by the
         envelope theorem the closest points' own migration does not change the separation to
@@ -234,7 +249,8 @@ class ContactModel:
         dt = np.hstack([-_I, skew(ra), _I, -skew(rb)])
         return -(self.normal @ dt)
 
-    def tangential_rows(self) -> np.ndarray:
+    @cached_property
+    def _tangential_rows(self) -> np.ndarray:
         """The shift increment's change (3, 12). Without the step's kinematics, ds = P dt.
         With them (:meth:`stepping`): the evaluated increment is
         Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at the
@@ -249,7 +265,8 @@ class ContactModel:
         dt = dt + 0.5 * (skew(self.turn_b) @ d_rb - skew(self.turn_a) @ d_ra)
         return self.fraction * (P @ dt)
 
-    def _geometry(self):
+    @cached_property
+    def _geometry_rows(self):
         """(ξ, dn, dr_a, dr_b) as (3, 12) arrays: the contact point's migration over a, the
         normal's turn and the levers' changes (module docstring)."""
         n = self.normal
