@@ -15,6 +15,10 @@ computed here from formulas and geometry, never by the code under test:
 * the groove across the side of a periodic box, and the next step after :func:`wrap`;
 * the upper plate moved sideways: a sphere and a tilted ellipsoid roll without slip (the rigid
   limits of design notes §3d: turn Δs/h, centre Δs/2, Δh = (F_T/F_N) Δs);
+* periodic square arrays of spheres: 3 x 3 about to touch (that of
+  benchmarks/cluster_lattice.py, every particle balanced, the pair forces cancel, Coulomb cell
+  by cell, the same bits in reverse numbering), and 3 x 3 identical spheres touching or pressed
+  into each other (Hertz at each plate for the gap, Hertz between two spheres for the pairs);
 * bad input and non-convergence.
 
 Resolutions are coarse (30-60 cells per particle size: 2.6-5 cells across a contact radius) so
@@ -584,7 +588,8 @@ def test_a_periodic_array_of_spheres_about_to_touch_converges():
     its current force, while the BEM, one increment from the start of the step, keeps μN until
     the motion has taken the step's slip back (a whole-lattice spin of 6.5e-3 rad was never
     undone), and the active-set passes cycled between the plateau and beyond it. Now 8 passes.
-    Every particle balanced, the pair forces cancel, Coulomb cell by cell, F_N carried."""
+    Every particle balanced, the pair forces cancel, Coulomb cell by cell, F_N carried, and
+    the same bits with the particles numbered in reverse."""
     n, load = 3, 0.5
     bodies, side = square_lattice(n, 2e-4, spread=5e-4)
     result = solve_cluster(bodies, mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=n * n * load,
@@ -597,6 +602,13 @@ def test_a_periodic_array_of_spheres_about_to_touch_converges():
     assert result.iterations <= 15
     # no spin is left over: the pairs turn each particle by far less than 6.5e-3 rad
     assert np.abs(result.rotation).max() < 1e-4
+    # the particles numbered in reverse: the same poses and forces, bit for bit
+    back = solve_cluster(bodies[::-1], mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=n * n * load,
+                         box=(side, side), numerics=ClusterNumerics(resolution=20, tol=1e-5))
+    assert np.array_equal(back.translation[::-1], result.translation)
+    assert np.array_equal(back.rotation[::-1], result.rotation)
+    assert np.array_equal(back.force_residual[::-1], result.force_residual)
+    assert back.gap == result.gap
 
 
 @pytest.mark.parametrize("gap", [0.0, -1e-3])
