@@ -45,7 +45,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 6])
     parser.add_argument("--spread", type=float, default=5e-4, help="relative std of R")
-    parser.add_argument("--gap", type=float, default=2e-4, help="lattice gap / 2R")
+    parser.add_argument("--gap", type=float, default=2e-4,
+                        help="lattice gap / 2R (below 0: pressed in; write --gap=-1e-3)")
     parser.add_argument("--resolution", type=float, default=20.0)
     args = parser.parse_args(argv)
     for n in args.sizes:

@@ -15,6 +15,10 @@ computed here from formulas and geometry, never by the code under test:
 * the groove across the side of a periodic box, and the next step after :func:`wrap`;
 * the upper plate moved sideways: a sphere and a tilted ellipsoid roll without slip (the rigid
   limits of design notes §3d: turn Δs/h, centre Δs/2, Δh = (F_T/F_N) Δs);
+* periodic square arrays of spheres: 3 x 3 about to touch (that of
+  benchmarks/cluster_lattice.py, every particle balanced, the pair forces cancel, Coulomb cell
+  by cell, the same bits in reverse numbering), and 3 x 3 identical spheres touching or pressed
+  into each other (Hertz at each plate for the gap, Hertz between two spheres for the pairs);
 * bad input and non-convergence.
 
 Resolutions are coarse (30-60 cells per particle size: 2.6-5 cells across a contact radius) so
@@ -546,3 +550,96 @@ def test_wrap_keeps_a_centre_a_rounding_below_zero_inside_the_box():
     (moved,), _ = wrap([body], {}, (L, L))
     assert 0.0 <= moved.centre[0] < L and 0.0 <= moved.centre[1] < L
     assert abs(moved.centre[0] - (-1e-19)) < 1e-18
+
+
+# --- arrays of spheres that touch ----------------------------------------------------------
+def square_lattice(n, gap, spread=0.0, seed=1):
+    """n × n spheres on the lower plate at the nodes of a square lattice of spacing
+    2R (1 + gap) (R times 1 + spread N(0, 1) each, as benchmarks/cluster_lattice.py) and the
+    side of its periodic box, m."""
+    rng = np.random.default_rng(seed)
+    spacing = 2 * R * (1 + gap)
+    bodies = []
+    for i in range(n):
+        for j in range(n):
+            r = R * (1 + spread * rng.standard_normal())
+            bodies.append(Body(Sphere(r), MAT,
+                               centre=(spacing * (i + 0.5), spacing * (j + 0.5), r)))
+    return bodies, n * spacing
+
+
+def check_contact_laws(result, mu):
+    """Newton's third law (the pair forces cancel: the particles' resultants sum to the plates'
+    forces) and Coulomb's law cell by cell (|τ| <= μ p) on every contact."""
+    total = np.array([math.fsum(result.force_residual[:, d]) for d in range(3)])
+    external = result.plate_force + result.lower_force
+    assert np.abs(total - external).max() <= 1e-12 * result.normal_force
+    for hist in result.histories.values():
+        s = hist.solved
+        tau = np.hypot(s.traction[0], s.traction[1])
+        assert (tau <= mu * s.pressure * (1 + 1e-9) + 1e-12 * s.pressure.max()).all()
+
+
+def test_a_periodic_array_of_spheres_about_to_touch_converges():
+    """The 3 × 3 array of benchmarks/cluster_lattice.py: spheres 0.02 % apart with a 0.05 %
+    spread of radii, so that eight neighbours overlap by up to 1 µm before the load and their
+    one-cell contacts slide at the first motion (slip distance μN/k₀ ~ 1 nm). It used to stop at
+    a residual of 1.4e-2: a sliding contact's reversal was modelled as elastic unloading from
+    its current force, while the BEM, one increment from the start of the step, keeps μN until
+    the motion has taken the step's slip back (a whole-lattice spin of 6.5e-3 rad was never
+    undone), and the active-set passes cycled between the plateau and beyond it. Now 8 passes.
+    Every particle balanced, the pair forces cancel, Coulomb cell by cell, F_N carried, and
+    the same bits with the particles numbered in reverse."""
+    n, load = 3, 0.5
+    bodies, side = square_lattice(n, 2e-4, spread=5e-4)
+    result = solve_cluster(bodies, mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=n * n * load,
+                           box=(side, side), numerics=ClusterNumerics(resolution=20, tol=1e-5))
+    check_balanced(result)
+    check_contact_laws(result, 0.3)
+    pairs = [c for c in result.contacts if c.j not in ("lower", "upper")]
+    assert len([c for c in pairs if c.normal_force > 0]) >= 8         # it does touch
+    assert -result.plate_force[2] == pytest.approx(n * n * load, rel=1e-5)
+    assert result.iterations <= 15
+    # no spin is left over: the pairs turn each particle by far less than 6.5e-3 rad
+    assert np.abs(result.rotation).max() < 1e-4
+    # the particles numbered in reverse: the same poses and forces, bit for bit
+    back = solve_cluster(bodies[::-1], mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=n * n * load,
+                         box=(side, side), numerics=ClusterNumerics(resolution=20, tol=1e-5))
+    assert np.array_equal(back.translation[::-1], result.translation)
+    assert np.array_equal(back.rotation[::-1], result.rotation)
+    assert np.array_equal(back.force_residual[::-1], result.force_residual)
+    assert back.gap == result.gap
+
+
+@pytest.mark.parametrize("gap", [0.0, -1e-3])
+def test_identical_spheres_touching_on_a_square_lattice(gap):
+    """3 × 3 identical spheres touching (gap 0) or pressed into each other (centres 0.1 % of
+    2R closer than touching) on a periodic square lattice, 0.5 N each: by symmetry the pair
+    contacts are horizontal and carry no vertical load, so each plate contact carries F_N/9
+    and the gap is 2R − 2 δ_Hertz(F_N/9) with δ = (9F²/(16 E*² R))^(1/3) (sphere on a rigid
+    plate, each side). Pressed in, every pair carries Hertz's load between two spheres of the
+    overlap 2R·10⁻³ (the centres do not move sideways: each is pushed equally from both
+    sides), the same for all of them."""
+    n, load = 3, 0.5
+    bodies, side = square_lattice(n, gap)
+    result = solve_cluster(bodies, mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=n * n * load,
+                           box=(side, side), numerics=ClusterNumerics(resolution=60, tol=1e-5))
+    check_balanced(result)
+    check_contact_laws(result, 0.3)
+    plates = [c.normal_force for c in result.contacts if c.j in ("lower", "upper")]
+    assert len(plates) == 2 * n * n
+    assert max(plates) - min(plates) <= 1e-5 * load
+    assert np.mean(plates) == pytest.approx(load, rel=1e-5)
+    delta = (9 * load**2 / (16 * E_STAR**2 * R)) ** (1 / 3)
+    # the grid's error at 60 cells per size (4 across the plate contacts' radius): 0.27 % of δ
+    assert result.gap == pytest.approx(2 * R - 2 * delta, abs=0.01 * delta)
+    pairs = [c.normal_force for c in result.contacts if c.j not in ("lower", "upper")]
+    if gap == 0.0:
+        assert max(pairs, default=0.0) <= 1e-5 * load
+    else:
+        overlap = -2 * R * gap
+        hertz = 4 / 3 * E_STAR_PAIR * math.sqrt(R / 2) * overlap**1.5
+        assert len(pairs) == 2 * n * n
+        assert max(pairs) - min(pairs) <= 1e-5 * load
+        assert np.mean(pairs) == pytest.approx(hertz, rel=0.03)       # measured −1.0 %
+    assert np.abs(result.translation[:, :2]).max() < 1e-3 * delta

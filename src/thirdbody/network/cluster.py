@@ -38,17 +38,23 @@ model of each contact as the tangent.** One iteration:
    (stick or slide, open or closed) follows the predicted motion, in passes until it settles;
    a sliding contact starts on its stick branch, from which the step can reverse its slip
    (on the slide branch it has no stiffness along the slip, and a particle that must roll back
-   would see a singular model). The linear system is solved per connected component of the
-   particle-particle contacts (the plate gap, under force control, by a Schur complement), with
-   a small Levenberg-Marquardt shift so that modes without any stiffness (a particle that
-   touches nothing, the free translation of a particle sliding on both plates) do not move:
-   the minimum-norm step.
+   would see a singular model). That branch is the elastic predictor from the start of the
+   step, T + k₀ (ds + s) with s the contact's slip in the step: the BEM solves the step as one
+   increment, so a contact that slid keeps μN until the motion has taken its slip back. Each
+   pass must lower the merit of the piecewise-linear model at the branches of its own step,
+   else the step is halved towards the last pass's (undamped, the passes cycle between a
+   saturated contact's plateau and beyond it). The linear system is solved per connected
+   component of the particle-particle contacts (the plate gap, under force control, by a Schur
+   complement), with a small Levenberg-Marquardt shift so that modes without any stiffness (a
+   particle that touches nothing, the free translation of a particle sliding on both plates)
+   do not move: the minimum-norm step.
 5. *Trust region.* The step is scaled as a whole so that no particle turns by more than 0.05 ρ
    rad or moves by more than 0.05 ρ of its size, and no contact's normal force changes by more
    than ρ times itself (or the force scale). The trial poses are evaluated (step 1-2); the step
    is accepted if the sum of squared scaled residuals fell, and ρ doubles when the model
-   predicted the fall well, halves when it did not; a rejected step (or one at which a contact
-   solve failed) quarters ρ and is retried from the same state.
+   predicted the fall well (the piecewise model's, at the scaled step), halves when it did
+   not; a rejected step (or one at which a contact solve failed) quarters ρ and is retried from
+   the same state. A step of zero (the model sees no way down) ends the attempt.
 6. *Two phases.* Far from equilibrium a step first moves the particles without turning them
    (:func:`_iterate`). When that leads to a state the full iteration does not leave (its
    residual stalls), the step is solved again from its start without that phase.
@@ -1032,10 +1038,9 @@ _STICK_FIRST = True
 
 
 def _elastic(model: ContactModel) -> TangentialLaw:
-    """The stick branch of a contact's tangential law at its current force, stiffness k₀."""
-    n = model.normal
-    zero = np.zeros(3)
-    return TangentialLaw(model.k_stick * (np.eye(3) - np.outer(n, n)), zero, zero, "stick")
+    """The stick branch of a sliding contact's tangential law, stiffness k₀: the elastic
+    predictor from the start of the step (:meth:`ContactModel.elastic_law`)."""
+    return model.elastic_law()
 
 
 def _same(laws_a: list, laws_b: list) -> bool:
@@ -1048,50 +1053,101 @@ def _same(laws_a: list, laws_b: list) -> bool:
     return True
 
 
+def _keep_plate_loaded(problem: _Problem, terms: list[_Term], active: list) -> None:
+    """Under force control, while no contact presses the upper plate its open contacts stay
+    active (the plate must come down to them)."""
+    if problem.force is not None and not any(a for t, a in zip(terms, active, strict=True)
+                                             if t.upper):
+        for m, t in enumerate(terms):
+            if t.upper and not t.bem:
+                active[m] = True
+
+
+def _piecewise(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: float,
+               step: np.ndarray, dh: float):
+    """The piecewise-linear model at a step: each contact on the status and branch the step
+    puts it on (:func:`_statuses`), each branch linearised there, so that the model's residual
+    at the step is the piecewise model's own value. Returns (residual (n, 6), plate residual,
+    the model, active, laws)."""
+    active, laws = _statuses(terms, step, dh)
+    _keep_plate_loaded(problem, terms, active)
+    model = _model(problem.n, terms, active, laws)
+    out, plate_out = model.residual(R, plate, step, dh)
+    return out, plate_out, model, active, laws
+
+
+#: halvings of a step of the active-set passes towards the last one before they give up: of
+#: the Newton step of the model at the last step's own branches (a descent direction of its
+#: merit), and of a step from other branches (the start's)
+_MODEL_HALVINGS, _OTHER_HALVINGS = 30, 8
+#: the active-set passes stop when the model's merit is this share of its value at a zero step
+#: (its residuals 1e-7 of theirs: the model's root, well below what the BEM will follow)
+_MODEL_ROOT = 1e-14
+
+
 def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: float,
-                 translate: bool = False):
+                 scale: float, translate: bool = False):
     """The model's step with an active set of contacts: a solved contact whose normal force
     the step would take below zero opens (its force goes, it has no stiffness), an open one
     that the step would close acts with its spring, and each contact's tangential law takes the
     branch (stick, or slide along the trial force) the predicted motion puts it on
     (:meth:`ContactModel.tangential_law`); repeated until the set settles (a semismooth Newton
-    step on the model). Under force control, while no contact presses the upper plate its open
-    contacts stay active (the plate must come down to them). Returns (step, dh, model,
-    active)."""
+    step on the piecewise-linear model). Each pass must lower the model's merit (scaled by
+    ``scale``, N) at its own branches (:func:`_piecewise`), else its step is halved towards
+    the last one: on a saturating law (a contact that slid in the step, whose force stays μN
+    until the motion takes its slip back) the undamped passes cycle between the plateau and
+    beyond it. Under force control, while no contact presses the upper plate its open
+    contacts stay active. Returns (step, dh, model, active)."""
     n = problem.n
     groups = _components(n, terms)
-    upper_open = [m for m, t in enumerate(terms) if t.upper and not t.bem]
-
-    def keep_plate_loaded(active: list) -> None:
-        if problem.force is not None and not any(a for t, a in zip(terms, active, strict=True)
-                                                 if t.upper):
-            for m in upper_open:
-                active[m] = True
-
-    active, laws = _statuses(terms, np.zeros((n, 6)), 0.0)
-    # a sliding contact starts on its stick branch (the elastic predictor from its current
-    # force): on the slide branch it has no stiffness along its slip, so a particle whose
+    step, dh = np.zeros((n, 6)), 0.0
+    out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate, step, dh)
+    merit = start_merit = _merit(problem, out, plate_out, scale, translate)
+    # a sliding contact starts on its stick branch (the elastic predictor from the start of
+    # the step): on the slide branch it has no stiffness along its slip, so a particle whose
     # only way out is to roll back (a sphere under a plate that moved by more than the slip
     # distance) sees a singular model whose least-norm step never reverses the slip; the
     # passes below put it back on the slide branch if the step goes on along the slip
+    start_laws = laws
     if _STICK_FIRST:
-        laws = [_elastic(t.model) if t.model.sliding and law.state == "slide" else law
-                for t, law in zip(terms, laws, strict=True)]
+        start_laws = [_elastic(t.model) if t.model.sliding and law.state == "slide" else law
+                      for t, law in zip(terms, laws, strict=True)]
     # an open contact closer than its approach at the force scale starts active: a particle
     # pressed towards a neighbour it does not touch yet has no other support in the model (the
     # pass below opens it again if the step does not close it)
-    active = [t.bem or t.sigma <= t.reach for t in terms]
-    keep_plate_loaded(active)
-    model = _model(n, terms, active, laws)
-    step, dh = _solve_model(problem, model, groups, R, plate, translate)
-    for _ in range(_ACTIVE_SET_PASSES):
-        new_active, new_laws = _statuses(terms, step, dh)
-        keep_plate_loaded(new_active)
-        if new_active == active and _same(new_laws, laws):
-            break
-        active, laws = new_active, new_laws
-        model = _model(n, terms, active, laws)
-        step, dh = _solve_model(problem, model, groups, R, plate, translate)
+    start_active = [t.bem or t.sigma <= t.reach for t in terms]
+    _keep_plate_loaded(problem, terms, start_active)
+    used = (start_active, start_laws)
+    own = start_active == active and _same(start_laws, laws)
+    trial, trial_dh = _solve_model(problem, _model(n, terms, start_active, start_laws), groups,
+                                   R, plate, translate)
+    for _ in range(2 * _ACTIVE_SET_PASSES):
+        t = 1.0
+        for _halving in range((_MODEL_HALVINGS if own else _OTHER_HALVINGS) + 1):
+            cand = step + t * (trial - step)
+            cand_dh = dh + t * (trial_dh - dh)
+            out, plate_out, cand_model, cand_active, cand_laws = _piecewise(
+                problem, terms, R, plate, cand, cand_dh)
+            cand_merit = _merit(problem, out, plate_out, scale, translate)
+            if cand_merit < merit or (t == 1.0 and cand_merit == merit == 0.0):
+                break
+            t *= 0.5
+        else:
+            if own:
+                break       # not even the step's own Newton step lowers the model's merit
+            # the start's branches (or the last pass's) lead nowhere from here: the Newton
+            # step of the model at the step's own branches, a descent direction of its merit
+            used, own = (active, laws), True
+            trial, trial_dh = _solve_model(problem, model, groups, R, plate, translate)
+            continue
+        step, dh, merit = cand, cand_dh, cand_merit
+        model, active, laws = cand_model, cand_active, cand_laws
+        if t == 1.0 and cand_active == used[0] and _same(cand_laws, used[1]):
+            break           # the step's own branches: the piecewise model's root
+        if merit <= _MODEL_ROOT * start_merit:
+            break           # the piecewise model's root to rounding
+        used, own = (cand_active, cand_laws), True
+        trial, trial_dh = _solve_model(problem, cand_model, groups, R, plate, translate)
     return step, dh, model, active
 
 
@@ -1370,10 +1426,13 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
         t0 = time.perf_counter()
         if model is None:
             terms = _terms(problem, ev)
-            full, dh_full, model, active = _newton_step(problem, terms, R, plate, translate)
+            full, dh_full, model, active = _newton_step(problem, terms, R, plate,
+                                                        merit_scale, translate)
+        if dh_full == 0.0 and not full.any():
+            break           # the model sees no way down: the trial would be this state again
         step, dh, clipped = _limit(problem, terms, active, ev.scale or merit_scale, full,
                                    dh_full, radius)
-        out, plate_out = model.residual(R, plate, step, dh)
+        out, plate_out = _piecewise(problem, terms, R, plate, step, dh)[:2]
         predicted = _merit(problem, out, plate_out, merit_scale, translate)
         problem.timings["newton"] += time.perf_counter() - t0
         trial_centres, trial_rotations = _moved(ev.centres, ev.rotations, step)

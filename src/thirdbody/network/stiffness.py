@@ -22,7 +22,10 @@ ds = P dt (P = I − n nᵀ). The contact law, modelled from the last BEM solve:
   (for Cattaneo-Mindlin c/a = (1 − Q/μN)^(1/3) and the tangent stiffness is k₀ (1 − Q/μN)^(1/3)),
   while loading further; k₀ when unloading (Mindlin-Deresiewicz: the stiffness after a reversal
   is the initial one) or when a sliding contact's slip reverses. A sliding contact whose slip
-  goes on keeps μ(N + dN) along its slip, turning with stiffness μN/|slip| across it. In
+  goes on keeps μ(N + dN) along its slip, turning with stiffness μN/|slip| across it; one
+  whose slip reverses is the return to the cone of the elastic predictor from the start of
+  the step, T + k₀ (ds + s_slip) with s_slip its slip in the step (the BEM solves the step as
+  one increment, so the force stays μN until the reversal has taken the slip back). In
   partial slip the force also grows with N at a fixed shift (the contact grows): Cattaneo-
   Mindlin's dT/dN (:meth:`ContactModel._stick_normal`). The caller (the active set of
   :mod:`~thirdbody.network.cluster`) picks the branch from the predicted motion and
@@ -45,6 +48,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
@@ -105,6 +109,10 @@ class ContactModel:
         N m/rad.
     curvature_a, curvature_b : (3, 3) arrays
         Curvature tensors on the tangent plane, world, 1/m.
+    slipped : (3,) array or None
+        A sliding contact's slip in the step (the mean slip increment of b over a, in the
+        tangent plane), m: how far its shift must go back before it sticks again (the BEM
+        solves one increment from the start of the step), None if it has stick cells.
     """
 
     normal: np.ndarray
@@ -129,6 +137,7 @@ class ContactModel:
     turn_b: np.ndarray | None = None
     fraction: float = 1.0
     touch: np.ndarray | None = None
+    slipped: np.ndarray | None = None
 
     def stepping(self, *, mid_a, mid_b, turn_a, turn_b, fraction: float) -> ContactModel:
         """The same model with the kinematics of the step's shift increment (the evaluation's
@@ -158,6 +167,7 @@ class ContactModel:
         kn = 1.5 * N / approach if approach > 0 else 0.0
         T = np.asarray(tangential_force, dtype=float)
         direction = None
+        slipped = None
         across = 0.0
         share = 0.0
         if mu <= 0 or N <= 0:
@@ -173,13 +183,15 @@ class ContactModel:
                 direction = P @ np.array([1.0, 0.0, 0.0])
                 direction /= np.linalg.norm(direction)
             across = k0 if length == 0 else min(mu * N / length, k0)
+            slipped = s
         else:
             share = math.sqrt(max(stick_area, 0.0) / area) if area > 0 else 0.0
         kw = 16.0 / 3.0 * radius**3 / torsion * share**3
         return cls(n, np.asarray(point, dtype=float), np.asarray(centre_a, dtype=float),
                    np.asarray(centre_b, dtype=float), N, T, float(twist_moment), kn, float(mu),
                    k0 * share, k0, direction, across, kw,
-                   np.asarray(curvature_a, dtype=float), np.asarray(curvature_b, dtype=float))
+                   np.asarray(curvature_a, dtype=float), np.asarray(curvature_b, dtype=float),
+                   slipped=slipped)
 
     @classmethod
     def spring(cls, *, normal, point, centre_a, centre_b, stiffness: float,
@@ -210,6 +222,20 @@ class ContactModel:
         return np.hstack([-_I, skew(ra), _I, -skew(rb)])
 
     def approach_row(self) -> np.ndarray:
+        """dδ (12,) (:attr:`_approach_row`; computed once per model, not to be modified)."""
+        return self._approach_row
+
+    def tangential_rows(self) -> np.ndarray:
+        """The shift increment's change (3, 12) (:attr:`_tangential_rows`; computed once per
+        model, not to be modified)."""
+        return self._tangential_rows
+
+    def _geometry(self):
+        """(ξ, dn, dr_a, dr_b) (:attr:`_geometry_rows`; computed once per model)."""
+        return self._geometry_rows
+
+    @cached_property
+    def _approach_row(self) -> np.ndarray:
         """dδ (12,): the relative normal motion at the point of first touch (``touch``, the
         closest points of the undeformed surfaces; the pressure centroid if not given): by the
         envelope theorem the closest points' own migration does not change the separation to
@@ -223,7 +249,8 @@ class ContactModel:
         dt = np.hstack([-_I, skew(ra), _I, -skew(rb)])
         return -(self.normal @ dt)
 
-    def tangential_rows(self) -> np.ndarray:
+    @cached_property
+    def _tangential_rows(self) -> np.ndarray:
         """The shift increment's change (3, 12). Without the step's kinematics, ds = P dt.
         With them (:meth:`stepping`): the evaluated increment is
         Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at the
@@ -238,7 +265,8 @@ class ContactModel:
         dt = dt + 0.5 * (skew(self.turn_b) @ d_rb - skew(self.turn_a) @ d_ra)
         return self.fraction * (P @ dt)
 
-    def _geometry(self):
+    @cached_property
+    def _geometry_rows(self):
         """(ξ, dn, dr_a, dr_b) as (3, 12) arrays: the contact point's migration over a, the
         normal's turn and the levers' changes (module docstring)."""
         n = self.normal
@@ -301,14 +329,28 @@ class ContactModel:
         loading = not self.sliding and float(ds @ T) > 0
         k = self.k_loading if loading else self.k_stick
         g = self._stick_normal() if not self.sliding else zero
-        trial = T + k * ds + g * dN
+        # a sliding contact's force is the return to the cone of the elastic predictor from
+        # the start of the step, T₀ + k₀ Δs = T + k₀ s_slip: the BEM solves one increment
+        # from there, so a reversal first takes back the step's slip at μN before it unloads
+        back = self.slipped if self.sliding and self.slipped is not None else zero
+        trial = T + k * (ds + back) + g * dN
         size = float(np.linalg.norm(trial))
         if size <= limit or size == 0:
-            return TangentialLaw(k * P, g, zero, "stick")
+            return TangentialLaw(k * P, g, k * back, "stick")
         d = trial / size
         across = self.mu * self.normal_force / size * k * (P - np.outer(d, d))
         value = self.mu * self.normal_force * d - across @ ds
         return TangentialLaw(across, self.mu * d, value - T, "slide")
+
+    def elastic_law(self) -> TangentialLaw:
+        """The stick branch of a sliding contact's law (where a Newton step starts it): the
+        elastic predictor from the start of the step, T + k₀ (ds + s_slip) (module
+        docstring); for a contact with stick cells, from its current force, T + k₀ ds."""
+        n = self.normal
+        P = _I - np.outer(n, n)
+        zero = np.zeros(3)
+        back = self.slipped if self.sliding and self.slipped is not None else zero
+        return TangentialLaw(self.k_stick * P, zero, self.k_stick * back, "stick")
 
     def _stick_normal(self) -> np.ndarray:
         """dT/dN at a fixed shift of a contact in partial slip (3,): Cattaneo-Mindlin's
