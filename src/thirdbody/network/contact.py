@@ -434,6 +434,8 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
     normal = _solve_normal(lattice, pair, normal_force, delta, bound, tol,
                            None if carry is None else carry.support, seed,
                            faceted=faceted, from_poses=normal_force is None and approach is None)
+    if normal is None:
+        return None
     grid = normal.grid
     _check_extent(normal, a, b)
 
@@ -533,10 +535,12 @@ def _twist_angle(rotation: Rotation, axis: np.ndarray) -> float:
 def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
                   delta: float | None, bound: float, tol: float,
                   history: Window | None, warm: tuple[Window, np.ndarray] | None,
-                  faceted: bool = False, from_poses: bool = False) -> NormalContact:
+                  faceted: bool = False, from_poses: bool = False) -> NormalContact | None:
     """The normal solve on a window holding every cell that can touch (see
     :mod:`~thirdbody.network.window`): grows the bound or the evaluated cells until the
     approach is below the bound and no cell next to the evaluated ones is below the approach.
+    None under approach control when no cell of the window reaches the approach (an overlap
+    thinner than the lattice resolves).
 
     A cell below the closest approach means the narrow phase missed a deeper minimum, an error
     for smooth shapes. A faceted mesh's closest approach comes from a smoothed surface (its
@@ -567,6 +571,10 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
         window = window_around(below, corner, history)
         gap = window_gap(lattice, window, corner, mask)
         grid = window.grid(lattice.spacing)
+        if force is None and delta <= float(np.min(gap)):
+            # the bodies overlap by less than the lattice resolves (its cells sample the
+            # surfaces beside the exact closest points): no cell touches, no contact
+            return None
         initial = None
         if warm is not None:
             initial = remap(warm[1], warm[0], window)

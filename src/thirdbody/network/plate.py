@@ -346,6 +346,8 @@ def solve_plate(body: Body, side: str, *, plate: float = 0.0, mu: float, spacing
     bound = 1.05 * delta + 1e-12 * spacing
     normal = _solve_normal(lattice, ElasticPair.rigid_plate(body.material), None, delta, bound,
                            tol, history, initial, faceted=_smoothing(body) > 0, from_poses=True)
+    if normal is None:          # no cell reaches the plate
+        return None
     window = _window_of(normal.grid)
     grid = normal.grid
     p = normal.pressure
