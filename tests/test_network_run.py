@@ -221,6 +221,39 @@ def test_particles_overlapping_through_a_side_of_the_box_are_refused():
                       box=(6 * R, 4 * R))
 
 
+def test_large_and_small_spheres_in_a_periodic_row_carry_load_through_their_contacts():
+    """Spheres of 1 mm and 0.7 mm alternate in a periodic row, each touching its neighbours
+    (centres sqrt((R_a + R_b)² − (R_a − R_b)²) apart). The plates press only the large ones;
+    as they flatten they squeeze the small ones down into the lower plate through the four
+    pair contacts. Checked from the contact table alone: every particle's contact forces sum to
+    zero (measured 4.9e-8 of F_N), the pair forces on the small spheres balance the lower
+    plate's push on them, the coordination is (2 · 4 + 6) / 4 = 3.5, and each large sphere
+    carries F_N/2 from the upper plate (the row's symmetry)."""
+    Ra, Rb = 1e-3, 0.7e-3
+    dx = float(np.sqrt((Ra + Rb) ** 2 - (Ra - Rb) ** 2))
+    layer = tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(Ra if k % 2 == 0 else Rb), MAT),
+                                        (x * dx, 0.0))
+                      for k, x in enumerate((-1.5, -0.5, 0.5, 1.5))])
+    _, ds = _run(layer, stop=1.0, steps=2, resolution=40, box=(4 * dx, 5e-3))
+    F = ds.total_force.values
+    assert list(ds.particle_contacts.values) == [4, 4]
+    assert list(ds.coordination.values) == [3.5, 3.5]
+    upper = ds.plate_normal_force.sel(interface="upper").values
+    assert upper[:, [0, 2]] == pytest.approx(np.column_stack([F / 2, F / 2]), rel=1e-6)
+    assert (upper[:, [1, 3]] == 0).all()
+    for k in range(2):
+        rows = np.flatnonzero(ds.contact_step.values == k)
+        i, j = ds.contact_i.values[rows], ds.contact_j.values[rows]
+        force = ds.contact_force.values[rows]
+        pairs = j >= 0
+        assert (ds.contact_normal_force.values[rows][pairs] > 1e-3 * F[k]).all()
+        for p in range(4):
+            total = force[i == p].sum(axis=0) - force[pairs & (j == p)].sum(axis=0)
+            assert np.abs(total).max() < 1e-5 * F[k], (k, p, total)
+        small_lower = ds.plate_normal_force.sel(interface="lower").values[k, [1, 3]]
+        assert (small_lower > 1e-3 * F[k]).all()
+
+
 def test_a_periodic_box_must_hold_the_particles():
     with pytest.raises(ValueError, match=r"box \(network.box\).*particle 2 at \(0.002"):
         tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=1.0, steps=1), mu_pp=0.3,
