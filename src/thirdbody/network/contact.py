@@ -555,6 +555,8 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
         g = np.full(mask.shape, np.inf)
         g[jj, ii] = lattice.gap(ii + corner[0], jj + corner[1])
         below = g < bound
+        if not below.any() and force is None and float(g.min()) >= delta:
+            return None         # an overlap thinner than the lattice resolves: no contact
         if not below.any():
             raise RuntimeError("no cell of the contact frame lies below the approach bound: "
                                "the closest approach is inconsistent with the lattice")
