@@ -221,7 +221,25 @@ def test_particles_overlapping_through_a_side_of_the_box_are_refused():
                       box=(6 * R, 4 * R))
 
 
-def test_large_and_small_spheres_in_a_periodic_row_carry_load_through_their_contacts():
+@pytest.fixture(scope="module")
+def squeeze():
+    """The bundled network_row example: spheres of 1 mm and 0.7 mm alternating in a periodic
+    row, each touching its neighbours, pressed by 0.5 N then 1 N (40 cells per size)."""
+    from importlib import resources
+
+    from thirdbody.io import load_config
+
+    body, plates, load, numerics = load_config(
+        resources.files("thirdbody") / "examples" / "network_row.toml").build()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        sim = tb.Simulation(body, plates, load, **numerics)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    return sim, ds
+
+
+def test_large_and_small_spheres_in_a_periodic_row_carry_load_through_their_contacts(squeeze):
     """Spheres of 1 mm and 0.7 mm alternate in a periodic row, each touching its neighbours
     (centres sqrt((R_a + R_b)² − (R_a − R_b)²) apart). The plates press only the large ones;
     as they flatten they squeeze the small ones down into the lower plate through the four
@@ -229,12 +247,9 @@ def test_large_and_small_spheres_in_a_periodic_row_carry_load_through_their_cont
     zero (measured 4.9e-8 of F_N), the pair forces on the small spheres balance the lower
     plate's push on them, the coordination is (2 · 4 + 6) / 4 = 3.5, and each large sphere
     carries F_N/2 from the upper plate (the row's symmetry)."""
-    Ra, Rb = 1e-3, 0.7e-3
-    dx = float(np.sqrt((Ra + Rb) ** 2 - (Ra - Rb) ** 2))
-    layer = tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(Ra if k % 2 == 0 else Rb), MAT),
-                                        (x * dx, 0.0))
-                      for k, x in enumerate((-1.5, -0.5, 0.5, 1.5))])
-    _, ds = _run(layer, stop=1.0, steps=2, resolution=40, box=(4 * dx, 5e-3))
+    _, ds = squeeze
+    spacing = np.sqrt((1e-3 + 0.7e-3) ** 2 - (1e-3 - 0.7e-3) ** 2)      # touching
+    assert np.diff(ds.x0.values) == pytest.approx([spacing] * 3, rel=1e-12)
     F = ds.total_force.values
     assert list(ds.particle_contacts.values) == [4, 4]
     assert list(ds.coordination.values) == [3.5, 3.5]
@@ -385,7 +400,7 @@ def test_the_top_view_draws_each_particle_contact_with_its_force(row):
 
 
 # --- the command line --------------------------------------------------------------------------
-def test_the_network_example_runs_from_the_command_line(tmp_path, row):
+def test_the_network_example_runs_from_the_command_line(tmp_path, squeeze):
     """`thirdbody run` on the bundled network example: the results file, written step by step
     (the contact table appended), holds the run in memory; the figures, the contact network's
     included; a bad [network] table is refused with exit code 2 and nothing written."""
@@ -401,11 +416,11 @@ def test_the_network_example_runs_from_the_command_line(tmp_path, row):
     out = tmp_path / "out"
     result = runner.invoke(app, ["run", str(config), "-o", str(out)])
     assert result.exit_code == 0, result.output
-    assert "particle contacts, coordination 2.00" in result.output
+    assert "4 particle contacts, coordination 3.50" in result.output
     ds = open_results(out / "results.nc")
-    assert ds.attrs["status"] == "complete" and ds.sizes["step"] == 4
-    assert ds.sizes["contact"] == 4 * 6
-    _, memory = row
+    assert ds.attrs["status"] == "complete" and ds.sizes["step"] == 2
+    assert ds.sizes["contact"] == 2 * 10
+    _, memory = squeeze
     for name in ("contact_step", "contact_i", "contact_j", "contact_force", "contact_state",
                  "normal_force", "plate_gap", "translation", "coordination"):
         assert np.array_equal(ds[name].values, memory[name].values), name
