@@ -397,6 +397,9 @@ def test_the_top_view_draws_each_particle_contact_with_its_force(row):
     x = (ds.x0.values + ds.position.sel(component="x").values[-1]) * 1e3
     assert segments[0][:, 0] == pytest.approx([x[0], x[1]])
     assert segments[1][:, 0] == pytest.approx([x[2], x[0] + 6.0])     # the image: +6 mm
+    box = [p for p in fig.axes[0].patches if p.get_gid() == "periodic box"]
+    assert len(box) == 1 and (box[0].get_width(), box[0].get_height()) == pytest.approx((6, 4))
+    assert box[0].get_xy() == pytest.approx((-3, -2))
 
 
 # --- the command line --------------------------------------------------------------------------

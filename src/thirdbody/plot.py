@@ -714,6 +714,13 @@ def layer_top_view(ds, steps: list[int] | None = None, layer=None):
                    edgecolors="k", linewidths=0.5, zorder=3, gid="normal force")
         if "contact" in ds.dims:
             network = _force_network(ax, ds, step, cx[panel], cy[panel], network)
+        box = _inputs(ds).get("box")
+        if box:                                     # the periodic box, centred on the origin
+            from matplotlib.patches import Rectangle
+
+            ax.add_patch(Rectangle((-box[0] / 2 * 1e3, -box[1] / 2 * 1e3), box[0] * 1e3,
+                                   box[1] * 1e3, fill=False, ls=":", lw=1.0, color="0.4",
+                                   gid="periodic box"))
         c = float(ds.compression.values[k])
         ax.set_title(f"step {step}: c = {100 * c:.2f} %, $F_N$ = "
                      f"{float(ds.total_force.values[k]):.3g} N, "
