@@ -160,6 +160,42 @@ def test_the_shift_search_turns_the_shift_to_meet_an_oblique_force(monkeypatch, 
     assert abs(e[0] * along[1] - e[1] * along[0]) > 1e-3      # sine of the angle between them
 
 
+@pytest.mark.parametrize("angle", [0, 20])
+def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypatch, angle):
+    """A step repeated under a slightly different pressure (the turned ellipse at 1.0005 times
+    its load, as the next coupled pass sees it) at Q = 0.9999 μP, 0° and 20° from x: no cell
+    sticks, so force control searches the shift. Started from the last step's shift and
+    traction (``shift_guess``) the search starts at that shift and angle, goes to the root of
+    the straightened force through it and brackets the root there: 5 solves at both angles
+    (with the angle's correction), against 10 and 9 from scratch. It returns the step the
+    search from scratch returns, to the solvers' tolerance."""
+    from thirdbody.bem.tangential import restart_traction, solve_tangential_from
+
+    e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    first = solve_tangential(_turned_ellipse(), MU, force=0.9999 * MU * W_ELLIPSE * e)
+    grid = first.normal.grid
+    X, Y = grid.mesh()
+    u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
+    v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
+    normal = tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, first.normal.pair,
+                             force=1.0005 * W_ELLIPSE)
+    Q = 0.9999 * MU * normal.force * e
+    solves = _count_shift_solves(monkeypatch)
+    cold = solve_tangential(normal, MU, force=Q)
+    n_cold = len(solves)
+    start = restart_traction(first.traction, first.slip, normal, MU)
+    warm = solve_tangential_from(start, normal, MU, force=Q, shift_guess=first.shift)
+    n_warm = len(solves) - n_cold
+    assert cold.stick.sum() == 0 and warm.stick.sum() == 0
+    assert 0 < n_warm <= 5 < n_cold
+    check_coulomb(warm)
+    force = warm.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
+    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
+    np.testing.assert_allclose(warm.shift, cold.shift, rtol=1e-6)
+    np.testing.assert_allclose(warm.traction, cold.traction, rtol=0,
+                               atol=1e-6 * MU * normal.pressure.max())
+
+
 @pytest.mark.parametrize("warm_fails", [False, True])
 def test_the_shift_search_gives_the_force_controlled_step(monkeypatch, warm_fails):
     """The shift search (the fallback of force control) called at Q = 0.5 μP at 20° on the

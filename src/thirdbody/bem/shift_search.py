@@ -36,16 +36,24 @@ _BROYDEN_STEPS = 8
 #: the shift search's first step past a shift that transmits too little force: the root
 #: predicted from the deficit's fall as s⁻², times this margin
 _BRACKET_MARGIN = 1.05
+#: jumps from a guessed shift (:func:`force_by_shift`) before bracketing from scratch
+_GUESS_JUMPS = 6
 
 
 def force_by_shift(step: _Step, force: np.ndarray, failure: str,
-                   solve_at: Callable[..., TangentialContact]) -> TangentialContact:
+                   solve_at: Callable[..., TangentialContact], *,
+                   guess: np.ndarray | None = None,
+                   start: np.ndarray | None = None) -> TangentialContact:
     """The step that transmits ``force`` (2,), N, found by displacement-controlled solves
     ``solve_at(step, shift, start)`` (shift: the plate's total shift, m; start: a starting
     traction or None), each started from the last one's traction (from scratch if that
     fails). ``failure``: why force control failed, for the error raised if this fails too.
+    ``guess``: a total shift (2,), m, close to the root (that of the same step under a
+    slightly different pressure, e.g. the last coupled pass), and ``start`` its traction, Pa:
+    the search then brackets the root around the guess, at the guess's angle, instead of
+    from the full-sliding scale (falling back on that if no bracket is found there).
     The step reports the CG iterations of all the solves."""
-    return _ShiftSearch(step, force, failure, solve_at).run()
+    return _ShiftSearch(step, force, failure, solve_at).run(guess, start)
 
 
 class _ShiftSearch:
@@ -92,11 +100,23 @@ class _ShiftSearch:
         h = _straightened(f, q, cap) if cap > q else f - q
         return np.array([h, float(np.arctan2(t.force @ self.e_perp, t.force @ self.e))])
 
-    def run(self) -> TangentialContact:
+    def run(self, guess: np.ndarray | None = None,
+            start: np.ndarray | None = None) -> TangentialContact:
         e, e_perp, q, cap, ftol = self.e, self.e_perp, self.q, self.cap, self.ftol
         solve, along = self.solve, self.along
         s_perp = 0.0
-        lo, f_lo, hi, f_hi, t_hi = self._bracket(s_perp)
+        bracket = None
+        if guess is not None:
+            ds = np.asarray(guess, dtype=float) - self.step.prev_shift
+            s_guess = float(ds @ e)
+            if s_guess > 0:
+                # the root of a nearby step: its angle, and a bracket a small stride around it
+                s_perp = float(ds @ e_perp)
+                self.warm = start
+                bracket = self._bracket_from(s_guess, s_perp)
+            if bracket is None:
+                s_perp = 0.0
+        lo, f_lo, hi, f_hi, t_hi = self._bracket(s_perp) if bracket is None else bracket
         for _ in range(10):                     # corrections of the shift's angle
             best = _root(solve, along, lo, f_lo, hi, f_hi, t_hi, s_perp, ftol, q, cap)
             if best is None:
@@ -159,6 +179,46 @@ class _ShiftSearch:
                     lo, f_lo, hi, f_hi, t_hi = _bracket_behind(solve, along, t_zero, f_lo, s_hi,
                                                                s_perp, self.failure)
         return lo, f_lo, hi, f_hi, t_hi
+
+    def _bracket_from(self, s: float, s_perp: float):
+        """A bracket along e from a guessed shift increment ``s`` > 0 (the root of a nearby
+        step) at ``s_perp``, by the jumps of :func:`_bracket_factor`: forwards while the
+        force falls short, backwards (the same model, inverted) while it exceeds the target.
+        None if no sign change within a few jumps (the caller then brackets from scratch)."""
+        solve, along, q, cap = self.solve, self.along, self.q, self.cap
+        t = solve(s, s_perp)
+        f = along(t)
+        if abs(f) <= self.ftol:
+            return s, f, s, f, t
+        h = _straightened(q + f, q, cap) if cap > q + f else None
+        previous = None
+        for _ in range(_GUESS_JUMPS):
+            # the straightened force h is nearly linear in s (:func:`_root`): the first jump
+            # goes to the root of the line through s = 0 (h = -1 there if the deficit falls
+            # like s⁻²), the next ones twice as far as the secant's root
+            if h is None:
+                far = 0.5 * s
+            elif previous is None or previous[1] == h:
+                far = s / (h + 1.0)
+            else:
+                s_old, h_old = previous
+                far = s - 2.0 * h * (s - s_old) / (h - h_old)
+            if not far > 0:
+                far = 0.5 * s
+            if (far - s) * f > 0 or far == s:     # the jump must go towards the root
+                far = s * (1.0 + 1e-3 if f < 0 else 1.0 - 1e-3)
+            t_far = solve(far, s_perp)
+            f_far = along(t_far)
+            if abs(f_far) <= self.ftol:
+                return far, f_far, far, f_far, t_far
+            if (f_far < 0) != (f < 0):
+                (lo, f_lo, _), (hi, f_hi, t_hi) = sorted([(s, f, t), (far, f_far, t_far)],
+                                                         key=lambda x: x[1])
+                return lo, f_lo, hi, f_hi, t_hi
+            previous = (s, h)
+            s, f, t = far, f_far, t_far
+            h = _straightened(q + f, q, cap) if cap > q + f else None
+        return None
 
     def _bracket_near(self, s_best: float, s_perp: float):
         """A new bracket along e near the last root ``s_best`` at the corrected ``s_perp``: a

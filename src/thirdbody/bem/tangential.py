@@ -235,23 +235,28 @@ def solve_tangential(normal: NormalContact, mu: float, *,
 _OPTIONS = dict(solve_tangential.__kwdefaults__)
 
 
-def solve_tangential_from(start: np.ndarray | None, normal: NormalContact, mu: float,
+def solve_tangential_from(start: np.ndarray | None, normal: NormalContact, mu: float, *,
+                          shift_guess: ArrayLike | None = None,
                           **options: Any) -> TangentialContact:
     """:func:`solve_tangential` (``options``: its keyword arguments) with the iteration
     started from the traction ``start`` (2, ny, nx), Pa, instead of the coarse-to-fine
     cascade: its cells on the friction limit start slipping in its direction. For solvers that
     repeat a step under a slightly different pressure (the coupled passes of
     :func:`~thirdbody.bem.solve_coupled`, a particle's coupled evaluations), with ``start``
-    from :func:`restart_traction`. None: as :func:`solve_tangential`. The start changes the
-    iteration, not what is accepted: the same checks apply."""
+    from :func:`restart_traction`. None: as :func:`solve_tangential`. ``shift_guess``: the
+    plate's total shift (2,), m, of that repeated step; under force control, should the
+    active set fail (near full sliding), the shift search starts there instead of from
+    scratch (:func:`~thirdbody.bem.shift_search.force_by_shift`). The start and the guess
+    change the iteration, not what is accepted: the same checks apply."""
     step, force, shift = _validated(normal, mu, **{**_OPTIONS, **options})
-    return _dispatch(step, force, shift, start)
+    guess = None if shift_guess is None else _vector(shift_guess, "shift_guess")
+    return _dispatch(step, force, shift, start, guess)
 
 
 def _dispatch(step: _Step, force: np.ndarray | None, shift: np.ndarray | None,
-              start: np.ndarray | None) -> TangentialContact:
+              start: np.ndarray | None, guess: np.ndarray | None = None) -> TangentialContact:
     """The case the load makes of the step, solved: ``force`` (2,), N, or the total ``shift``
-    (2,), m."""
+    (2,), m; ``guess``: a total shift (2,), m, near the one the force needs."""
     if force is None:
         return _shift_control(step, shift, start)
     q = float(np.hypot(*force))
@@ -259,7 +264,7 @@ def _dispatch(step: _Step, force: np.ndarray | None, shift: np.ndarray | None,
         return _full_sliding(step, force / q)
     if step.cap == 0:
         return _frictionless(step)
-    return _force_control(step, force, start)
+    return _force_control(step, force, start, guess)
 
 
 @dataclass(frozen=True)
@@ -403,19 +408,19 @@ def _frictionless(step: _Step) -> TangentialContact:
     return _finish(step, np.zeros_like(step.tau0), np.zeros(2), 0, step.tol, full=True)
 
 
-def _force_control(step: _Step, force: np.ndarray,
-                   start: np.ndarray | None = None) -> TangentialContact:
+def _force_control(step: _Step, force: np.ndarray, start: np.ndarray | None = None,
+                   guess: np.ndarray | None = None) -> TangentialContact:
     """0 < |force| < μF_N: the active set with the force constraint, its answer's force checked
     from the tractions like Coulomb's law (the active set holds it to round-off); if either
     fails (typically close to full sliding, where the stick zone is a few cells or none), the
-    shift search."""
+    shift search (from the total shift ``guess``, m, when given)."""
     t, failure = _by_active_set(step, force=force, start=start)
     if t is not None:
         if np.abs(t.force - force).max() <= max(step.tol, 1e-12) * step.cap:
             return t
         failure = (f"tangential solver: force ({t.force[0]:.6g}, {t.force[1]:.6g}) N "
                    f"misses the prescribed ({force[0]:.6g}, {force[1]:.6g}) N")
-    return force_by_shift(step, force, failure, _shift_control)
+    return force_by_shift(step, force, failure, _shift_control, guess=guess, start=start)
 
 
 def _shift_control(step: _Step, shift: np.ndarray,

@@ -244,9 +244,10 @@ class Interface:
         ``restart``: a step of the same load under a slightly different pressure (its window
         and step, e.g. the last coupled pass), to start the iteration from: its slip cells on
         their new friction limit (:func:`~thirdbody.bem.tangential.restart_traction`)."""
-        start = None
+        start = guess = None
         if restart is not None:
             r_window, r_step = restart
+            guess = r_step.shift
             start = restart_traction(remap(r_step.traction, r_window, solution.window),
                                      remap(r_step.slip, r_window, solution.window) > 0.5,
                                      solution.contact, mu)
@@ -258,7 +259,7 @@ class Interface:
             traction = remap(p_step.traction, p_window, solution.window)
             prev = replace(p_step, traction=traction)
             pressure = remap(p_step.normal.pressure, p_window, solution.window)
-        return solve_tangential_from(start, solution.contact, mu,
+        return solve_tangential_from(start, solution.contact, mu, shift_guess=guess,
                                      force=np.asarray(force, dtype=float), previous=prev,
                                      tol=self.tol, twist=twist, coupling=coupling,
                                      previous_pressure=pressure if coupling else None)
