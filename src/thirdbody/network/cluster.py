@@ -45,9 +45,13 @@ model of each contact as the tangent.** One iteration:
    else the step is halved towards the last pass's (undamped, the passes cycle between a
    saturated contact's plateau and beyond it). The linear system is solved per connected
    component of the particle-particle contacts (the plate gap, under force control, by a Schur
-   complement), with a small Levenberg-Marquardt shift so that modes without any stiffness (a
-   particle that touches nothing, the free translation of a particle sliding on both plates)
-   do not move: the minimum-norm step.
+   complement), by a truncated pseudo-inverse (singular values below 1e-9 of the largest
+   dropped): modes without any stiffness (a particle that touches nothing, the free
+   translation of a particle sliding on both plates) do not move, and a residual the model
+   cannot change asks for no step along them: the minimum-norm least-squares step. (A shifted
+   diagonal answered such a residual with the residual over the shift: a 600 m move of a
+   sphere sliding on both plates, which the trust region's common factor turned into a step
+   of nothing for every particle.)
 5. *Trust region.* The step is scaled as a whole so that no particle turns by more than 0.05 ρ
    rad or moves by more than 0.05 ρ of its size, and no contact's normal force changes by more
    than ρ times itself (or the force scale). The trial poses are evaluated (step 1-2); the step
