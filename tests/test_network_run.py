@@ -513,3 +513,38 @@ def test_a_dense_layer_of_polydisperse_spheres_compresses_its_tallest_spheres_as
             assert upper[k, p] == pytest.approx(hertz, rel=0.03), (k, p)
             assert lower[k, p] == pytest.approx(upper[k, p], rel=1e-4)
         assert math.fsum(upper[k]) == pytest.approx(float(ds.total_force.values[k]), rel=1e-12)
+
+
+def test_a_tilted_potato_pressed_near_its_friction_limit_balances_as_a_two_force_body():
+    """The potato that stopped the dense potato layer at step 0, alone between the plates
+    (compression 0.01 of its height, μ = 0.5, 20 cells per size): its contacts are 4 to 5 cells
+    across, at |T|/μN = 0.9. The model gave a stick contact its unloading stiffness k₀ for any
+    motion back from the current iterate, but the BEM solves the step as one increment from
+    its start: a motion back is less loading, and the BEM's response was the same for ±1 nm
+    and ±1e-6 rad (measured), 2 to 6 times softer than k₀; the steps overshot and the trust
+    region shrank away (residual 1.5e-3 after 38 passes). With the partial-slip tangent both
+    ways it converges. Checked against statics: touching only the plates, the potato is a
+    two-force body, so the plates' forces are equal and opposite and lie along the line through
+    the two pressure centroids: |T|/N = horizontal over vertical distance between them."""
+    potato = _dense_layer("potato")[5].particle
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = tb.Simulation(tb.Layer([tb.PlacedParticle(potato, (0.0, 0.0))]), tb.Plates(0.5),
+                            tb.GapRamp(stop=0.01, steps=1), mu_pp=0.5, resolution=20,
+                            network_tol=1e-5)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    _check_contact_table(ds)
+    j = ds.contact_j.values
+    low, up = np.flatnonzero(j == -1)[0], np.flatnonzero(j == -2)[0]
+    force = ds.contact_force.values
+    N = ds.contact_normal_force.values
+    assert force[low] == pytest.approx(-force[up], abs=1e-4 * N[low])
+    T = np.hypot(force[up][0], force[up][1])
+    assert 0.4 < T / N[up] < 0.5                       # near μ, sticking
+    assert list(ds.contact_state.values) == [0, 0]     # stick
+    arm = ds.contact_point.values[up] - ds.contact_point.values[low]
+    assert np.hypot(arm[0], arm[1]) / arm[2] == pytest.approx(T / N[up], rel=1e-4)
+    # the force on the particle from the upper plate points along the line of the centroids
+    unit = arm / np.linalg.norm(arm)
+    assert np.linalg.norm(np.cross(unit, force[up])) < 1e-4 * N[up]
