@@ -10,6 +10,7 @@ touches, and the identical particles' equal shares.
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import numpy as np
@@ -461,3 +462,107 @@ def test_paraview_gets_the_contacts_as_lines(row, tmp_path):
         assert mesh.points[b] == pytest.approx([x[i], 0.0, z], abs=1e-9)
     assert 'part="3"' in (tmp_path / "results.pvd").read_text()
     assert any(f.name == f"network_{last:04d}.vtu" for f in files)
+
+
+# --- a dense polydisperse layer -----------------------------------------------------------------
+def _dense_layer(shape: str, box: float = 6e-3):
+    """The dense layers of /tmp/dense_repro.py: a relaxed periodic placement at area fraction
+    0.6, lognormal sizes 1 ± 0.2 mm, tilted up to 20°, μ = μ_pp = 0.5, gap control."""
+    return tb.Layer.random(box=(box, box), material=MAT, area_fraction=0.6, size=1e-3,
+                           size_std=0.2e-3, distribution="lognormal", shape=shape,
+                           orientation="tilted", max_tilt_deg=20, placement="relaxed",
+                           periodic=True, seed=1)
+
+
+def _dense_run(shape: str, stop: float, steps: int, box: float = 6e-3):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        layer = _dense_layer(shape, box)
+        sim = tb.Simulation(layer, tb.Plates(0.5), tb.GapRamp(stop=stop, steps=steps),
+                            mu_pp=0.5, resolution=20, network_tol=1e-5)
+        ds = sim.run()
+    return layer, sim, ds
+
+
+def _check_contact_table(ds, tol: float = 1e-5) -> None:
+    """From the contact table alone: every particle's contact forces sum to zero within ``tol``
+    of the mean contact force (pair forces on j are minus those on i: Newton's third law), each
+    |τ| <= μN, and each plate pushes away from itself with its normal force."""
+    for k in ds.step.values:
+        rows = np.flatnonzero(ds.contact_step.values == k)
+        i, j = ds.contact_i.values[rows], ds.contact_j.values[rows]
+        force = ds.contact_force.values[rows]
+        N = ds.contact_normal_force.values[rows]
+        normal = ds.contact_normal.values[rows]
+        mu = ds.contact_mu.values[rows]
+        scale = float(N.mean())
+        tangential = force + N[:, None] * normal          # force on i = −N n + τ
+        assert (np.linalg.norm(tangential, axis=1) <= mu * N * (1 + 1e-9) + 1e-12).all()
+        assert np.abs((tangential * normal).sum(1)).max() < 1e-9 * scale   # in the plane
+        for p in range(ds.sizes["particle"]):
+            total = force[i == p].sum(axis=0) - force[(j == p)].sum(axis=0)
+            assert np.abs(total).max() < 10 * tol * scale, (k, p, total)
+
+
+def test_a_dense_layer_of_polydisperse_spheres_compresses_its_tallest_spheres_as_hertz_says():
+    """7 polydisperse spheres, compression 0.01 then 0.02. Step 1 stopped (residual 0.97, the
+    trust radius 3.7e-9) while the Newton step solved its singular model with a shifted
+    diagonal: a sphere resting on the lower plate and first pressed by the upper one slides on
+    both; without rotations (the first phase) its model has no stiffness along its slip, the
+    shift answered its unbalanced force with a 600 m move, and the trust region's common factor
+    left every other particle (the tallest sphere with 1.7 N unbalanced) a step of 1e-14 m.
+    With the truncated pseudo-inverse: 5 passes per step. Checked: the contact table balances
+    every particle, |τ| <= μN, and each loaded sphere touches only the plates, pressed as Hertz
+    says at the gap (2δ = 2R − h, within 3 % at 20 cells per size)."""
+    layer, sim, ds = _dense_run("sphere", stop=0.02, steps=2)
+    assert sim.status == "complete", sim.status
+    _check_contact_table(ds)
+    E_star = MAT.E / (1 - NU**2)
+    upper = ds.plate_normal_force.sel(interface="upper").values
+    lower = ds.plate_normal_force.sel(interface="lower").values
+    for k in range(2):
+        h = float(ds.plate_gap.values[k])
+        loaded = np.flatnonzero(upper[k] > 0)
+        assert len(loaded) >= 1 and list(ds.particle_contacts.values)[k] == 0
+        for p in loaded:
+            radius = layer[int(p)].particle.shape.radius
+            delta = (2 * radius - h) / 2
+            hertz = 4 / 3 * E_star * np.sqrt(radius) * delta**1.5
+            assert upper[k, p] == pytest.approx(hertz, rel=0.03), (k, p)
+            assert lower[k, p] == pytest.approx(upper[k, p], rel=1e-4)
+        assert math.fsum(upper[k]) == pytest.approx(float(ds.total_force.values[k]), rel=1e-12)
+
+
+def test_a_tilted_potato_pressed_near_its_friction_limit_balances_as_a_two_force_body():
+    """The potato that stopped the dense potato layer at step 0, alone between the plates
+    (compression 0.01 of its height, μ = 0.5, 20 cells per size): its contacts are 4 to 5 cells
+    across, at |T|/μN = 0.9. The model gave a stick contact its unloading stiffness k₀ for any
+    motion back from the current iterate, but the BEM solves the step as one increment from
+    its start: a motion back is less loading, and the BEM's response was the same for ±1 nm
+    and ±1e-6 rad (measured), 2 to 6 times softer than k₀; the steps overshot and the trust
+    region shrank away (residual 1.5e-3 after 38 passes). With the partial-slip tangent both
+    ways it converges. Checked against statics: touching only the plates, the potato is a
+    two-force body, so the plates' forces are equal and opposite and lie along the line through
+    the two pressure centroids: |T|/N = horizontal over vertical distance between them."""
+    potato = _dense_layer("potato")[5].particle
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = tb.Simulation(tb.Layer([tb.PlacedParticle(potato, (0.0, 0.0))]), tb.Plates(0.5),
+                            tb.GapRamp(stop=0.01, steps=1), mu_pp=0.5, resolution=20,
+                            network_tol=1e-5)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    _check_contact_table(ds)
+    j = ds.contact_j.values
+    low, up = np.flatnonzero(j == -1)[0], np.flatnonzero(j == -2)[0]
+    force = ds.contact_force.values
+    N = ds.contact_normal_force.values
+    assert force[low] == pytest.approx(-force[up], abs=1e-4 * N[low])
+    T = np.hypot(force[up][0], force[up][1])
+    assert 0.4 < T / N[up] < 0.5                       # near μ, sticking
+    assert list(ds.contact_state.values) == [0, 0]     # stick
+    arm = ds.contact_point.values[up] - ds.contact_point.values[low]
+    assert np.hypot(arm[0], arm[1]) / arm[2] == pytest.approx(T / N[up], rel=1e-4)
+    # the force on the particle from the upper plate points along the line of the centroids
+    unit = arm / np.linalg.norm(arm)
+    assert np.linalg.norm(np.cross(unit, force[up])) < 1e-4 * N[up]

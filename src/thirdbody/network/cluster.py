@@ -45,9 +45,13 @@ model of each contact as the tangent.** One iteration:
    else the step is halved towards the last pass's (undamped, the passes cycle between a
    saturated contact's plateau and beyond it). The linear system is solved per connected
    component of the particle-particle contacts (the plate gap, under force control, by a Schur
-   complement), with a small Levenberg-Marquardt shift so that modes without any stiffness (a
-   particle that touches nothing, the free translation of a particle sliding on both plates)
-   do not move: the minimum-norm step.
+   complement), by a truncated pseudo-inverse (singular values below 1e-9 of the largest
+   dropped): modes without any stiffness (a particle that touches nothing, the free
+   translation of a particle sliding on both plates) do not move, and a residual the model
+   cannot change asks for no step along them: the minimum-norm least-squares step. (A shifted
+   diagonal answered such a residual with the residual over the shift: a 600 m move of a
+   sphere sliding on both plates, which the trust region's common factor turned into a step
+   of nothing for every particle.)
 5. *Trust region.* The step is scaled as a whole so that no particle turns by more than 0.05 ρ
    rad or moves by more than 0.05 ρ of its size, and no contact's normal force changes by more
    than ρ times itself (or the force scale). The trial poses are evaluated (step 1-2); the step
@@ -882,7 +886,33 @@ def _components(n: int, terms: list[_Term]) -> list[list[int]]:
     return groups
 
 
-_LM = 1e-9      # Levenberg-Marquardt shift, relative to the largest scaled stiffness
+#: singular values of a group's scaled Newton matrix below this share of the largest are modes
+#: without stiffness: the step leaves them alone (a truncated pseudo-inverse)
+_RCOND = 1e-9
+#: 0: the truncated pseudo-inverse; a positive value: the former Levenberg-Marquardt shift of
+#: the diagonal by this share of its largest entry (kept to show what the pseudo-inverse fixes)
+_LM = 0.0
+
+
+def _least_norm(J: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """The minimum-norm least-squares solution of J X = B (truncated SVD, :data:`_RCOND`): modes
+    without stiffness do not move, and a residual the model cannot change (a particle that
+    slides on both plates, whose model has no stiffness along its slip, while its force along
+    the slip is unbalanced) asks for no step, where a shifted diagonal asked for the residual
+    over the shift (hundreds of metres, which the trust region's common factor then imposed on
+    every particle as a step of nothing)."""
+    if _LM > 0:
+        diag = np.abs(np.diag(J))
+        top = float(diag.max()) if diag.size else 0.0
+        J = J.copy()
+        J[np.diag_indices(J.shape[0])] += _LM * top if top > 0 else 1.0
+        return np.linalg.solve(J, B)
+    U, s, Vt = np.linalg.svd(J)
+    if s.size == 0 or s[0] == 0:
+        return np.zeros((J.shape[1], *B.shape[1:]))
+    keep = s > _RCOND * s[0]
+    UB = U[:, keep].T @ B
+    return Vt[keep].T @ (UB / (s[keep] if B.ndim == 1 else s[keep][:, None]))
 _ACTIVE_SET_PASSES = 12
 
 
@@ -989,15 +1019,12 @@ def _solve_model(problem: _Problem, model: _Model, groups, R: np.ndarray, plate:
             keep = keep[keep % 6 < 3]
             J = J[np.ix_(keep, keep)]
             rhs, hcol = rhs[keep], hcol[keep]
-        diag = np.abs(np.diag(J))
-        top = float(diag.max()) if diag.size else 0.0
-        J[np.diag_indices(keep.size)] += _LM * top if top > 0 else 1.0
         xs, ys = np.zeros(size), np.zeros(size)
         if force_control and hcol.any():
-            sol = np.linalg.solve(J, np.column_stack([rhs, hcol]))
+            sol = _least_norm(J, np.column_stack([rhs, hcol]))
             xs[keep], ys[keep] = sol[:, 0], sol[:, 1]
         else:
-            xs[keep] = np.linalg.solve(J, rhs)
+            xs[keep] = _least_norm(J, rhs)
         for k in group:
             m = index[k]
             x[k] = xs[6 * m:6 * m + 6] * col_scale[k]
