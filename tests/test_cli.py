@@ -111,6 +111,7 @@ def test_validate_prints_the_table_and_passes():
     assert result.output.count(" yes") == 7 and "NO" not in result.output
 
 
+@pytest.mark.slow
 def test_the_asymmetric_grain_example_turns_about_an_oblique_axis(tmp_path):
     """The bundled mesh example (copied with its mesh file), coarsened to run in seconds: it
     turns at first contact about an axis that is neither x nor y, and the orientation figure

@@ -265,6 +265,7 @@ def test_an_upright_sphere_between_the_plates_follows_spence(spence_reference):
     assert (plain.stick_area.values == plain.contact_area.values).all()   # Goodman: no slip
 
 
+@pytest.mark.slow
 def test_the_cli_runs_with_coupling_and_records_it(tmp_path):
     """`numerics.coupling = true` reaches the simulation: the run's inputs record it and its
     demand differs from the same run without it; a non-boolean is refused naming the key."""

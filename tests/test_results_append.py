@@ -105,7 +105,8 @@ def stop_after(k):
     return progress
 
 
-@pytest.mark.parametrize("make", [potato_sim, layer_sim], ids=["particle", "layer"])
+@pytest.mark.parametrize("make", [pytest.param(potato_sim, marks=pytest.mark.slow), layer_sim],
+                         ids=["particle", "layer"])
 def test_a_run_resumed_from_an_appended_file_ends_as_an_uninterrupted_one(make, tmp_path):
     path = tmp_path / "r.nc"
     with warnings.catch_warnings():

@@ -78,7 +78,8 @@ def test_an_interrupted_run_leaves_every_computed_step_and_resumes(tmp_path, chi
                                 straight.drop_vars(_timers(straight)))
 
 
-@pytest.mark.parametrize("how", ["sigkill-run", "sigint-group"])
+@pytest.mark.parametrize("how", ["sigkill-run",
+                                 pytest.param("sigint-group", marks=pytest.mark.slow)])
 def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path):
     """After step 3 was computed, SIGKILL of the run (not of its child), or SIGINT to the
     whole process group as Ctrl-C sends it: the child saves the steps it was sent (0-2), then

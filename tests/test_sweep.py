@@ -219,6 +219,7 @@ def swept(tmp_path_factory, client):
     return sweep, report, root / "out"
 
 
+@pytest.mark.slow
 def test_sweep_on_two_workers_equals_the_cases_run_one_by_one(swept, one_by_one):
     _, report, out = swept
     assert report.computed == 4 and report.skipped == 0 and not report.failures
@@ -235,6 +236,7 @@ def test_sweep_on_two_workers_equals_the_cases_run_one_by_one(swept, one_by_one)
         assert case.case_id in ds.attrs["sweep_case"]
 
 
+@pytest.mark.slow
 def test_the_summary_shows_the_rigid_turning_criterion(swept, one_by_one):
     """μ = 0.3 < ξ(θ0) for both tilts: the ellipsoid rotates to the rigid equilibrium angle;
     μ = 0.6 > ξ(θ0): it sticks. Checks the values land on the right sweep coordinates."""
@@ -267,6 +269,7 @@ def test_the_summary_shows_the_rigid_turning_criterion(swept, one_by_one):
     assert (out / "state_map.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_a_rerun_recomputes_nothing(swept, monkeypatch):
     sweep, _, out = swept
     files = sorted((out / "cases").glob("*.nc"))
@@ -415,6 +418,7 @@ def test_run_case_resumes_a_partial_file_to_the_uninterrupted_result(tmp_path):
     assert (fresh / case.filename).stat().st_mtime_ns == mtime
 
 
+@pytest.mark.slow
 def test_run_case_restarts_a_partial_file_it_cannot_continue(tmp_path):
     """A partial file whose inputs differ (another version, another case) is not resumed: the
     case starts afresh and ends as an uninterrupted run."""
