@@ -566,3 +566,26 @@ def test_a_tilted_potato_pressed_near_its_friction_limit_balances_as_a_two_force
     # the force on the particle from the upper plate points along the line of the centroids
     unit = arm / np.linalg.norm(arm)
     assert np.linalg.norm(np.cross(unit, force[up])) < 1e-4 * N[up]
+
+
+def test_a_file_written_before_network_runs_reads_with_their_variables(tmp_path):
+    """A results file of the layer model without the variables network runs brought (as the
+    files written before them): read back, plate_normal_force is normal_force at both plates,
+    fraction_slide 0, translation NaN; the file's own variables unchanged."""
+    from thirdbody.io import open_results
+
+    ds = tb.Simulation(_moduli_layer([0, 1, 2]), tb.Plates(0.3),
+                       tb.LinearRamp(stop=1.0, steps=1), resolution=20).run()
+    new = ["plate_normal_force", "translation", "fraction_slide", "particle_contacts",
+           "coordination", "both_plates_force", "network_residual", "network_iterations"]
+    old = ds.drop_vars(new)
+    old.to_netcdf(tmp_path / "old.nc", engine="h5netcdf")
+    back = open_results(tmp_path / "old.nc")
+    F = ds.normal_force.values
+    assert back.plate_normal_force.sel(interface="upper").values == pytest.approx(F)
+    assert back.plate_normal_force.sel(interface="lower").values == pytest.approx(F)
+    assert (back.fraction_slide.values == 0).all()
+    assert np.isnan(back.translation.values).all()
+    for name in new:
+        assert np.array_equal(back[name].values, ds[name].values, equal_nan=True), name
+    assert np.array_equal(back.normal_force.values, F)

@@ -106,8 +106,10 @@ def upgrade(ds):
     from ..records import _dim_attrs, _events_from_arrays
 
     version = file_format(ds)
-    if version >= schema.FORMAT_VERSION or "step" not in ds.dims:
-        return ds       # today's form, or not a results file (the caller says so)
+    if "step" not in ds.dims:
+        return ds       # not a results file (the caller says so)
+    if version >= schema.FORMAT_VERSION:
+        return _added_variables(ds)
     inputs = json.loads(ds.attrs.get("inputs", "{}"))
     if "particle" not in ds.dims:
         layer_level = {v.name for v in schema.by_kind("step")} & set(ds.data_vars)
@@ -177,8 +179,40 @@ def upgrade(ds):
                    {"units": "m", "long_name": "x of the cell centre (particle frame)"}),
             map_y=(("particle", "map_j"), cells[:, None] * ds.map_j.values[None, :],
                    {"units": "m", "long_name": "y of the cell centre (particle frame)"}))
-    return ds.assign_attrs(thirdbody_format=schema.FORMAT_VERSION,
-                           upgraded_from_format=version)
+    return _added_variables(ds).assign_attrs(thirdbody_format=schema.FORMAT_VERSION,
+                                             upgraded_from_format=version)
+
+
+#: per-step and per-particle variables that came with network runs, within format 2: a file
+#: written before them holds the layer model's run, whose values they are given when it is read
+#: (None: the variable's blank)
+_NETWORK_ERA = {"fraction_slide": 0.0, "plate_normal_force": None, "translation": None,
+                "particle_contacts": None, "coordination": None, "both_plates_force": None,
+                "network_residual": None, "network_iterations": None}
+
+
+def _added_variables(ds):
+    """``ds`` with the variables of :data:`_NETWORK_ERA` it lacks, as a run of the layer model
+    has them today: ``plate_normal_force`` is ``normal_force`` at both plates,
+    ``fraction_slide`` 0, the others their blank (NaN, or 0 for counts). Any other missing
+    variable stays missing (the reader that needs it says so)."""
+    from .. import schema
+
+    added = {}
+    for name in _NETWORK_ERA:
+        var = schema.VARIABLES[name]
+        if name in ds.variables or ("particle" in var.dims and "particle" not in ds.dims):
+            continue
+        lead = tuple(ds.sizes[d] for d in var.dims[:2 if var.kind == "particle" else 1])
+        if var.name == "plate_normal_force" and "normal_force" in ds:
+            F = ds.normal_force.transpose("step", "particle").values
+            values = np.repeat(F[..., None], 2, axis=-1)
+        else:
+            fill = _NETWORK_ERA.get(var.name)
+            count = int(np.prod(lead))
+            values = var.array([var.blank() if fill is None else fill] * count, lead)
+        added[var.name] = (var.dims, values, var.attrs)
+    return ds.assign(added) if added else ds
 
 
 def _blob_variable(blob: bytes) -> tuple:
