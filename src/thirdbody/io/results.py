@@ -198,6 +198,8 @@ def _added_variables(ds):
     variable stays missing (the reader that needs it says so)."""
     from .. import schema
 
+    if set(ds.dims) - set(schema.DIMENSIONS):
+        return ds       # a sweep's summary (its axes are dimensions): it keeps what it has
     added = {}
     for name in _NETWORK_ERA:
         var = schema.VARIABLES[name]
