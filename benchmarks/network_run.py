@@ -37,7 +37,8 @@ def run(box: float, shape: str, fraction: float, stop: float, steps: int, seed: 
     line = (f"{shape:9s} box {box * 1e3:4.1f} mm: {len(layer):3d} particles, {done}/{steps} "
             f"steps")
     if done:
-        line += (f", {seconds / done:6.1f} s/step, passes {[int(v) for v in ds.network_iterations.values]}"
+        passes = [int(v) for v in ds.network_iterations.values]
+        line += (f", {seconds / done:6.1f} s/step, passes {passes}"
                  f", last step: {int(ds.particle_contacts.values[-1])} particle contacts, "
                  f"coordination {float(ds.coordination.values[-1]):.2f}, "
                  f"{int(ds.loaded.values[-1])} loaded")
