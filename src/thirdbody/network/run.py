@@ -161,20 +161,20 @@ class NetworkEngine:
                 seconds: float) -> LayerRecord:
         n = len(result.bodies)
         plate = {i: {} for i in range(n)}
-        degree = [0] * n
+        touching = [[] for _ in range(n)]          # each particle's loaded contacts
         for c in result.contacts:
             if c.normal_force <= 0:
                 continue
+            touching[c.i].append(c)
             if isinstance(c.j, str):
                 plate[c.i][c.j] = c
-                degree[c.i] += 1
             else:
-                degree[c.i] += 1
-                degree[c.j] += 1
+                touching[c.j].append(c)
+        degree = [len(t) for t in touching]
         records = []
         for i, body in enumerate(result.bodies):
             records.append(self._particle(k, step, i, body, result, starts[i], plate[i],
-                                          displacement[i]))
+                                          touching[i], displacement[i]))
         loaded = [i for i in range(n) if records[i].state != "unloaded"]
         m = max(len(loaded), 1)
         both = [i for i in loaded if "upper" in plate[i] and "lower" in plate[i]]
@@ -212,14 +212,12 @@ class NetworkEngine:
         return LayerRecord(k, step.kind, records, values, contacts=rows)
 
     def _particle(self, k: int, step: LoadStep, i: int, body: Body, result: ClusterResult,
-                  start, plate: dict, displacement) -> StepRecord:
+                  start, plate: dict, mine: list, displacement) -> StepRecord:
         values = {name: schema.VARIABLES[name].blank() for name in _particle_names()}
         kind = result.kinematics[i]
         sides = ("upper", "lower")
         mu = {"upper": self.plates.mu_up, "lower": self.plates.mu_low}
-        others = [c for c in result.contacts_of(i)
-                  if not isinstance(c.j, str) and c.normal_force > 0]
-        mine = [c for c in result.contacts_of(i) if c.normal_force > 0]
+        others = [c for c in mine if not isinstance(c.j, str)]
         state = {"free": "unloaded", "stick": "stick"}.get(kind)
         if state is None and all(c.state == "stick" for c in mine):
             # no contact slides: it sticks, whatever it turned (a tilted particle turns a
