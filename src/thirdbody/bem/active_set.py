@@ -409,6 +409,11 @@ class ActiveSet:
                 return True
             z = precondition(r)
             rz_new = float(np.vdot(r, z))
+            if not rz_new > 0:
+                # nothing left along the admissible variations (r ⟂ them, or r·z underflows
+                # to zero: a trial pose whose increment is tiny); the outer test of Coulomb's
+                # law judges the answer
+                return True
             t = z + (rz_new / rz) * t
             rz = rz_new
         return False

@@ -463,6 +463,7 @@ class _Problem:
             self.histories[key] = (roles, hist.solved)
         self._start: dict = {}
         self.phase_one_used = False
+        self.correction: dict = {}     # (row, column) -> (6, 6): the models' learnt error
         self.failed = (0, 0)           # passes and contact solves of an attempt that failed
         self.timings = {"narrow": 0.0, "contacts": 0.0, "newton": 0.0}
 
@@ -936,7 +937,8 @@ class _Model:
         return out, plate_out
 
 
-def _model(n: int, terms: list[_Term], active: list[bool], laws: list) -> _Model:
+def _model(n: int, terms: list[_Term], active: list[bool], laws: list,
+           correction: dict | None = None) -> _Model:
     blocks: dict = {}
     constant = np.zeros((n, 6))
     h_col = np.zeros((n, 6))
@@ -981,6 +983,8 @@ def _model(n: int, terms: list[_Term], active: list[bool], laws: list) -> _Model
             h_col[t.a] += block_a[:, 8]
             h_row[t.a] += t.kn * t.row[:6]
             h_diag += t.kn * t.row[8]
+    for key, blk in (correction or {}).items():
+        add(*key, blk)
     return _Model(blocks, constant, h_col, h_row, h_diag, plate_constant)
 
 
@@ -1098,7 +1102,7 @@ def _piecewise(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: floa
     the model, active, laws)."""
     active, laws = _statuses(terms, step, dh)
     _keep_plate_loaded(problem, terms, active)
-    model = _model(problem.n, terms, active, laws)
+    model = _model(problem.n, terms, active, laws, problem.correction)
     out, plate_out = model.residual(R, plate, step, dh)
     return out, plate_out, model, active, laws
 
@@ -1146,7 +1150,8 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
     _keep_plate_loaded(problem, terms, start_active)
     used = (start_active, start_laws)
     own = start_active == active and _same(start_laws, laws)
-    trial, trial_dh = _solve_model(problem, _model(n, terms, start_active, start_laws), groups,
+    trial, trial_dh = _solve_model(problem, _model(n, terms, start_active, start_laws,
+                                                          problem.correction), groups,
                                    R, plate, translate)
     for _ in range(2 * _ACTIVE_SET_PASSES):
         t = 1.0
@@ -1175,7 +1180,100 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
             break           # the piecewise model's root to rounding
         used, own = (cand_active, cand_laws), True
         trial, trial_dh = _solve_model(problem, cand_model, groups, R, plate, translate)
+    if _REST_UNTOUCHED:
+        # a particle that no active term touches at the step has no stiffness in its model:
+        # its minimum-norm step is zero. The passes' damping can leave it the motion of an
+        # earlier pass on other branches (a spring of an open contact that pass closed), which
+        # the merit does not see but the trust region's common factor does: in a dense potato
+        # layer free neighbours turned by 2e-2 rad and held the pressed potato to 0.7 % of its
+        # step, pass after pass, until the attempt stalled
+        touched = np.zeros(n, dtype=bool)
+        for t, on in zip(terms, active, strict=True):
+            if on:
+                touched[t.a] = True
+                if t.b is not None:
+                    touched[t.b] = True
+        if step[~touched].any():
+            step = step.copy()
+            step[~touched] = 0.0
+            model, active = _piecewise(problem, terms, R, plate, step, dh)[2:4]
     return step, dh, model, active
+
+
+#: the step of a particle that no active term touches is zero (False: as the passes left it)
+_REST_UNTOUCHED = True
+
+
+#: the last attempt at a step lets the models learn their error from the BEM (:func:`_learn`)
+_BROYDEN = True
+#: a particle's model learns from a trial when its prediction of the residuals' change missed
+#: by more than this share of the change
+_BAD_MODEL = 0.3
+
+
+def _contact_keys(contacts, n: int) -> list[set]:
+    keys: list[set] = [set() for _ in range(n)]
+    for c in contacts:
+        keys[c.key[0]].add(c.key)
+        if len(c.key) == 3:
+            keys[c.key[1]].add(c.key)
+    return keys
+
+
+def _learn(problem: _Problem, ev: _Evaluation, trial: _Evaluation, terms: list[_Term],
+           active: list[bool], laws: list, predicted: np.ndarray, step: np.ndarray,
+           rows: np.ndarray) -> bool:
+    """Correct each particle's own block of the linear model by what a trial's BEM residuals
+    showed (Broyden's good update of the 6 x 6 diagonal block, row by row as in Schubert's
+    sparse update, in scaled unknowns: a rotation as the arc at the particle's size).
+
+    A contact's model is a few numbers from its last solve (Hertz's and Mindlin's stiffnesses of
+    a circle, the curvatures at the first touch). Where the BEM contact is not that (a tilted
+    potato's: elongated, nearly flat along one axis (radii 1.3 and 93 mm at one plate), or
+    several spots), the model's derivatives are off by a factor of several, or of opposite
+    sign where two plate contacts nearly cancel (dF_y/dφ_x −62 N/rad from the BEM against +38
+    modelled), and the Newton iteration stalls. The residuals R(x + s) of a trial against the
+    model's prediction give the model's error along s: E_k += (R(x + s) − R̂(s))_k ŝ_kᵀ / |ŝ_k|²
+    for particle k, so that (J + E) s reproduces the BEM. The correction is kept over the
+    passes of the attempt (the models are rebuilt every pass; their error is systematic). No
+    update for a particle ``rows`` leaves out (converged), for one whose contact set or a
+    contact's stick/slide state differs from the model's prediction (then the error is a
+    change of set, not of derivative), or whose change the model predicted within
+    :data:`_BAD_MODEL`; a particle whose contacts change loses its correction. Returns whether
+    a correction changed."""
+    n = problem.n
+    before = _contact_keys(ev.contacts, n)
+    after = _contact_keys(trial.contacts, n)
+    for k in range(n):
+        if before[k] != after[k]:
+            problem.correction.pop((k, k), None)
+    ok = [bool(rows[k]) and bool(before[k]) and before[k] == after[k] for k in range(n)]
+    sliding = {c.key: c.model.sliding for c in trial.contacts}
+    keys = [c.key for c in ev.contacts] + [None] * (len(terms) - len(ev.contacts))
+    for t, on, law, key in zip(terms, active, laws, keys, strict=True):
+        if on != t.bem or (key is not None and sliding.get(key) != (law.state == "slide")):
+            ok[t.a] = False
+            if t.b is not None:
+                ok[t.b] = False
+    R_trial = _residual_vector(problem, trial)[0]
+    mismatch = R_trial - predicted
+    change = R_trial - _residual_vector(problem, ev)[0]
+    # ŝ = (du, L dφ): |ŝ|² = s · (weight s); residuals scaled as (F, M / L)
+    weight = np.hstack([np.ones((n, 3)), np.repeat(problem.sizes[:, None] ** 2, 3, 1)])
+    changed = False
+    for k in range(n):
+        if not ok[k]:
+            continue
+        w = weight[k] ** -0.5
+        if np.linalg.norm(w * mismatch[k]) <= _BAD_MODEL * np.linalg.norm(w * change[k]):
+            continue
+        denom = float(step[k] @ (weight[k] * step[k]))
+        if not denom > 0:
+            continue
+        update = np.outer(mismatch[k], weight[k] * step[k]) / denom
+        problem.correction[(k, k)] = problem.correction.get((k, k), 0.0) + update
+        changed = True
+    return changed
 
 
 def _residual_vector(problem: _Problem, ev: _Evaluation) -> tuple[np.ndarray, float]:
@@ -1367,15 +1465,27 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
     try:
         return _iterate(problem, h, phase_one=True)
     except ClusterConvergenceError as first:
-        if not problem.phase_one_used:
-            raise
+        failed = problem.failed
         # the rotation-free first phase can leave the iteration in a state it does not leave
         # (before sliding contacts started the Newton step on their stick branch: a sphere
         # pressed into the groove of two others from touching, whose new contacts slid while
         # the lower spheres could not turn); the whole step again without it
+        if problem.phase_one_used:
+            try:
+                return _iterate(problem, h, phase_one=False)
+            except ClusterConvergenceError:
+                failed = tuple(a + b for a, b in zip(failed, problem.failed, strict=True))
+        if not _BROYDEN:
+            problem.failed = failed
+            raise first from None
+        # last, with models that learn their error from the BEM (:func:`_learn`): a tilted
+        # potato's contacts (elongated, nearly flat in one direction, several spots) are far
+        # from the circles the models assume, and its iteration stalls without
+        problem.failed = failed         # counted in the result of a later attempt
         try:
-            return _iterate(problem, h, phase_one=False)
+            return _iterate(problem, h, phase_one=True, learn=True)
         except ClusterConvergenceError:
+            problem.failed = tuple(a + b for a, b in zip(failed, problem.failed, strict=True))
             raise first from None
 
 
@@ -1408,7 +1518,8 @@ def _first_gap(problem: _Problem, h: float) -> float:
     return 0.5 * (low + high)
 
 
-def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResult:
+def _iterate(problem: _Problem, h: float, phase_one: bool = True,
+             learn: bool = False) -> ClusterResult:
     """The Newton iteration with its trust region (module docstring). A step starts (if
     ``phase_one``) with a phase that holds the rotations: far from equilibrium (the first pass
     of a step: the plate moved, new contacts carry nothing yet) the model's moments are
@@ -1416,7 +1527,8 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
     with contact forces that are still wrong; so the particles and the plate first move until
     the forces balance within :data:`_PHASE_ONE_TOL` of the force scale, then everything
     moves. That phase can also lead astray (:func:`solve_cluster` retries without it); an
-    attempt with it is abandoned when it stalls (:func:`_stalled`)."""
+    attempt with it is abandoned when it stalls (:func:`_stalled`). ``learn``: each particle's
+    model is corrected by what the trials showed (:func:`_learn`), the last attempt."""
     numerics = problem.numerics
     centres = np.array([b.centre for b in problem.start], dtype=float)
     rotations = [b.rotation for b in problem.start]
@@ -1428,6 +1540,7 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
     translate = phase_one and \
         _force_residual(problem, ev, ev.scale or merit_scale) > _PHASE_ONE_TOL
     problem.phase_one_used = translate
+    problem.correction = {}
     phase_passes = phase_end = 0
     merit = _merit(problem, R, plate, merit_scale, translate)
     log = []
@@ -1459,7 +1572,8 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
             break           # the model sees no way down: the trial would be this state again
         step, dh, clipped = _limit(problem, terms, active, ev.scale or merit_scale, full,
                                    dh_full, radius)
-        out, plate_out = _piecewise(problem, terms, R, plate, step, dh)[:2]
+        out, plate_out, _, step_active, step_laws = _piecewise(problem, terms, R, plate,
+                                                               step, dh)
         predicted = _merit(problem, out, plate_out, merit_scale, translate)
         problem.timings["newton"] += time.perf_counter() - t0
         trial_centres, trial_rotations = _moved(ev.centres, ev.rotations, step)
@@ -1476,6 +1590,11 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
                     f"({exc}); residual {worst:.3e} > tol {numerics.tol:.1e}") from exc
             continue
         solves += trial.solves
+        learnt = False
+        if learn:
+            Rs = _scaled(problem, R, plate, ev.scale or merit_scale)[0]
+            learnt = _learn(problem, ev, trial, terms, step_active, step_laws, out, step,
+                            np.abs(Rs).max(axis=1) > numerics.tol)
         phase_passes += translate
         R_trial, plate_trial = _residual_vector(problem, trial)
         merit_trial = _merit(problem, R_trial, plate_trial, merit_scale, translate)
@@ -1496,6 +1615,8 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True) -> ClusterResu
             radius *= 0.25
             if radius < numerics.min_radius:
                 break
+            if learnt:
+                model = None        # the model learnt from the trial: its step again
     done, worst = _converged(problem, ev, numerics.tol)
     if done:
         return _result(problem, ev, worst, len(log), solves, log)
