@@ -144,7 +144,7 @@ class NetworkEngine:
             load = {"gap": self.d0 * (1.0 - step.value)}
         result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
                                mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
-                               numerics=self.numerics, **load)
+                               plate_shift=step.shift, numerics=self.numerics, **load)
         starts = [b.rotation for b in state.bodies]
         bodies, histories = list(result.bodies), dict(result.histories)
         if self.box is not None:
