@@ -175,6 +175,17 @@ class Variable:
         return np.array(values, dtype=self.dtype).reshape((*lead, *self.shape))
 
 
+def _ratio(vector, scale: float) -> tuple[float, float]:
+    """``vector`` / ``scale`` componentwise (NaN where ``scale`` is not > 0)."""
+    if not scale > 0:
+        return (math.nan, math.nan)
+    return (float(vector[0]) / scale, float(vector[1]) / scale)
+
+
+def _magnitude(vector) -> float:
+    return math.hypot(float(vector[0]), float(vector[1]))
+
+
 def _v(name: str, dims: str, units: str, long_name: str, **kw) -> Variable:
     return Variable(name, tuple(dims.split()), units, long_name, **kw)
 
@@ -205,7 +216,8 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("fraction_rotate", "step", "1", "fraction of the loaded particles that rotated about "
                                        "their centroid", summary=True),
     _v("plate_force", "step component", "N",
-       "net tangential force of the particles on the upper plate (minus that on the lower)"),
+       "F_T: net tangential force of the particles on the upper plate (minus that on the "
+       "lower); under sliding it points against the plate's motion when the layer resists it"),
     _v("plate_moment", "step component", "N m",
        "tilting moment of the particles' forces on the upper plate, about the origin on the "
        "lower plate"),
@@ -224,6 +236,25 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
        "contact force, moments over it times the particle's size, the plate force over F_N)"),
     _v("network_iterations", "step", "1", "network runs: BEM passes over every contact in the "
                                           "step", dtype="int64", fill=0),
+    # --- sliding plates (design notes §3d; loading.Slide) ---------------------------------
+    _v("plate_shift", "step component", "m",
+       "s: horizontal displacement of the upper plate relative to the lower one since the "
+       "start of the run, at the end of the step", fill=0.0),
+    _v("sliding_distance", "step", "m", "path length the upper plate has slid since the start "
+                                        "of the run (the sum of |increment|)", fill=0.0),
+    _v("mu_eff", "step component", "1",
+       "effective friction vector F_T / F_N (plate_force / total_force): points against the "
+       "sliding when the layer resists it",
+       derive=lambda v: _ratio(v["plate_force"], v["total_force"])),
+    _v("mu_eff_magnitude", "step", "1", "effective friction |F_T| / F_N (>= 0)",
+       derive=lambda v: _magnitude(_ratio(v["plate_force"], v["total_force"]))),
+    _v("mu_eff_sliding", "step", "1",
+       "effective friction along the sliding: -F_T . e / F_N, e the direction of the last "
+       "sliding increment; > 0 when the layer resists the sliding, < 0 when it pushes the "
+       "plate along (NaN before the plate first slides)"),
+    _v("dilatancy", "step", "m",
+       "change of the plate gap since the end of the compression (the last step before the "
+       "plate first slid): > 0 when the layer dilates (NaN before the plate slides)"),
     _v("share_error", "step", "1", "largest error of a particle's share of F_N accepted by the "
                                    "load sharing in the step (converged: <= 1e-7)"),
     _v("time_total", "step", "s", "wall time of the step"),

@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,12 +59,67 @@ class NetworkState:
         The plate gap at the end of the last step, m (None before the first step).
     displacement : (n, 3) array
         Each centroid's displacement since the start of the run, m (not wrapped).
+    plate_shift : (2,) tuple
+        The upper plate's horizontal displacement since the start of the run, m.
+    sliding_distance : float
+        The path length it has slid, m.
+    slide_gap : float or None
+        The plate gap at the end of the compression (the last step before the plate first
+        slid), m; None until it slides.
+    slide_direction : (2,) tuple or None
+        Unit vector of the last sliding increment; None until the plate slides.
     """
 
     bodies: list
     histories: dict = field(default_factory=dict)
     gap: float | None = None
     displacement: np.ndarray | None = None
+    # the sliding plate (defaults: a checkpoint written before sliding plates reads as a run
+    # whose plate never slid)
+    plate_shift: tuple = (0.0, 0.0)
+    sliding_distance: float = 0.0
+    slide_gap: float | None = None
+    slide_direction: tuple | None = None
+
+
+class _Sliding(NamedTuple):
+    """The sliding plate at the end of a step (the :class:`NetworkState` fields of that name)."""
+
+    plate_shift: tuple
+    distance: float
+    slide_gap: float | None
+    direction: tuple | None
+
+    @classmethod
+    def after(cls, state: NetworkState, step: LoadStep) -> _Sliding:
+        """The plate after ``step`` from ``state`` (before the step)."""
+        dx, dy = (float(v) for v in step.shift)
+        shift = (state.plate_shift[0] + dx, state.plate_shift[1] + dy)
+        length = math.hypot(dx, dy)
+        if length == 0:
+            return cls(shift, state.sliding_distance, state.slide_gap, state.slide_direction)
+        gap = state.slide_gap
+        if gap is None:
+            if state.gap is None:
+                raise ValueError("the upper plate slides in the first load step: compress "
+                                 "the layer first (Slide does)")
+            gap = state.gap
+        return cls(shift, state.sliding_distance + length, gap, (dx / length, dy / length))
+
+    def along(self, result: ClusterResult) -> float:
+        """μ_eff along the sliding, positive when the layer resists it: the upper plate's
+        force on the particles along the last increment's direction, over F_N (NaN before
+        the plate slides)."""
+        if self.direction is None or not result.normal_force > 0:
+            return math.nan
+        e = self.direction
+        driving = math.fsum([float(result.plate_force[0]) * e[0],
+                             float(result.plate_force[1]) * e[1]])
+        return driving / result.normal_force + 0.0
+
+    def dilatancy(self, gap: float) -> float:
+        """h − h_c, m: the gap's change since the end of the compression (NaN before)."""
+        return math.nan if self.slide_gap is None else gap - self.slide_gap
 
 
 class NetworkEngine:
@@ -150,15 +206,18 @@ class NetworkEngine:
         if self.box is not None:
             bodies, histories = wrap(bodies, histories, self.box)
         displacement = state.displacement + result.translation
-        record = self._record(k, step, result, starts, displacement,
+        sliding = _Sliding.after(state, step)
+        record = self._record(k, step, result, starts, displacement, sliding,
                               time.perf_counter() - t0)
         state.bodies, state.histories, state.gap = bodies, histories, result.gap
         state.displacement = displacement
+        (state.plate_shift, state.sliding_distance, state.slide_gap,
+         state.slide_direction) = sliding
         return record
 
     # --- the step's records ------------------------------------------------------------------
     def _record(self, k: int, step: LoadStep, result: ClusterResult, starts, displacement,
-                seconds: float) -> LayerRecord:
+                sliding: _Sliding, seconds: float) -> LayerRecord:
         n = len(result.bodies)
         plate = {i: {} for i in range(n)}
         touching = [[] for _ in range(n)]          # each particle's loaded contacts
@@ -199,6 +258,8 @@ class NetworkEngine:
             plate_force=(float(-result.plate_force[0]) + 0.0,
                          float(-result.plate_force[1]) + 0.0),
             plate_moment=schema.VARIABLES["plate_moment"].blank(),
+            plate_shift=sliding.plate_shift, sliding_distance=sliding.distance,
+            mu_eff_sliding=sliding.along(result), dilatancy=sliding.dilatancy(result.gap),
             network_residual=result.residual, network_iterations=result.iterations,
             share_error=0.0, time_total=seconds)
         for var in schema.by_kind("step"):
