@@ -28,7 +28,7 @@ import pytest
 import thirdbody as tb
 from thirdbody.io import ConfigError, parse_config
 from thirdbody.network.cluster import HalfSpaceWarning
-from thirdbody.shapes import Sphere
+from thirdbody.shapes import Ellipsoid, Sphere
 
 R = 1e-3                            # sphere radius, m
 MAT = tb.Material(1e9, 0.3)
@@ -242,3 +242,130 @@ def test_a_sliding_run_resumed_mid_slide_ends_as_the_uninterrupted_one(sphere_ru
     again = make().run(resume_from=blob)
     for name in (*SLIDING, "plate_gap", "position", "quaternion"):
         assert np.array_equal(again[name].values, sphere_run[name].values, equal_nan=True), name
+
+
+# --- e: validation: a sphere rolls -------------------------------------------------------------
+def hertz_gap(force: float) -> float:
+    """A sphere R pressed by ``force`` between two rigid plates: h = 2(R − δ), Hertz's approach
+    δ = a²/R with a³ = 3 F R / (4 E*) at each plate."""
+    a = (3 * force * R / (4 * E_STAR)) ** (1 / 3)
+    return 2 * (R - a * a / R)
+
+
+def test_a_sphere_between_sliding_plates_rolls_without_resistance(sphere_run):
+    """Rolling without slip on both plates: per step the centre moves Δs/2 and the sphere turns
+    by Δs/h about +y (the axis perpendicular to the sliding, by the right-hand rule: the top
+    goes with the plate), h = 2(R − δ) from Hertz; so turn·2R/Δs = 2R/h (1.0078). The plate
+    needs no tangential force: measured |μ_eff| 2.4e-7 (tolerance 1e-5); the gap does not
+    change (no dilatancy) and every contact sticks."""
+    ds = sphere_run
+    out = slice(1, 4)                               # the three steps along +x
+    h = hertz_gap(F)
+    turn = np.radians(sliding(ds, "rotation").values[out])      # (step, component), rad
+    assert turn[:, 1] == pytest.approx(STEP / h, rel=1e-3)     # measured 2e-5
+    assert turn[:, 1] * 2 * R / STEP == pytest.approx(1.0, rel=0.01)
+    assert np.abs(turn[:, 0]).max() < 1e-6 * STEP / h
+    move = sliding(ds, "translation").values[out]
+    assert move[:, 0] == pytest.approx(STEP / 2, rel=1e-6)
+    assert np.abs(move[:, 1:]).max() < 1e-6 * STEP
+    assert np.abs(ds.mu_eff_magnitude.values).max() < 1e-5
+    assert np.abs(ds.dilatancy.values[1:]).max() < 1e-9 * h
+    assert (sliding(ds, "state").values == tb.schema.STATES.index("stick")).all()
+    assert (ds.contact_state.values == tb.schema.CONTACT_STATES.index("stick")).all()
+
+
+def test_a_sphere_slid_back_retraces_its_way_out(sphere_run):
+    """Out by 3 Δs and back, every contact sticking: each step back undoes one step out (the
+    centre moves −Δs/2, the turn is reversed), and the sphere ends where it started: position
+    and orientation as after the compression (measured 2e-21 m and 3e-12°)."""
+    ds = sphere_run
+    x = sliding(ds, "position").sel(component="x").values
+    turn = sliding(ds, "rotation").sel(component="y").values
+    assert x[4:] == pytest.approx(x[2::-1], abs=1e-6 * STEP)
+    assert turn[4:] == pytest.approx(-turn[1:4][::-1], rel=1e-6)
+    assert abs(x[-1] - x[0]) < 1e-6 * STEP
+    tilt = sliding(ds, "orientation").values
+    assert np.abs(tilt[-1] - tilt[0]).max() < 1e-6 * math.degrees(STEP / R)
+    assert ds.plate_gap.values[-1] == pytest.approx(ds.plate_gap.values[0], rel=1e-12)
+    assert (ds.contact_state.values == tb.schema.CONTACT_STATES.index("stick")).all()
+
+
+def test_a_sphere_under_a_held_gap_rolls_and_the_gap_stays():
+    """Gap control: the plates hold the gap of the compression, the sphere rolls as under force
+    control (centre Δs/2 per step) and its normal force stays (rel 1e-6)."""
+    load = tb.Slide(compression=0.008, distance=2 * STEP, steps=2, compress_steps=1)
+    ds = run(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), load)
+    h = ds.plate_gap.values
+    assert (h == h[0]).all() and (ds.dilatancy.values[1:] == 0).all()
+    assert ds.total_force.values == pytest.approx(ds.total_force.values[0], rel=1e-6)
+    x = sliding(ds, "position").sel(component="x").values
+    assert x == pytest.approx([0.0, STEP / 2, STEP], abs=1e-6 * STEP)
+
+
+# --- f: validation: a particle that cannot roll slides at the smaller μ ------------------------
+def rigid_ratio(theta: float) -> float:
+    """ξ(θ) of the rigid ellipse of semi-axes A (x) and C (z) tilted by θ about y: the offset of
+    its contact points over the gap, the tangential force over the normal one it needs to stay
+    put (design notes §3, eq 3)."""
+    s, c = math.sin(theta), math.cos(theta)
+    return (A**2 - C**2) * s * c / (A**2 * s * s + C**2 * c * c)
+
+
+def rigid_gap(theta: float) -> float:
+    """The height of that rigid ellipse, m."""
+    return 2 * math.sqrt(A**2 * math.sin(theta) ** 2 + C**2 * math.cos(theta) ** 2)
+
+
+@pytest.fixture(scope="module")
+def flat_run():
+    """An ellipsoid lying flat (semi-axes 1 x 0.8 x 0.2 mm, the smallest vertical), μ_up 0.6,
+    μ_low 0.3, pressed by 1 N, slid 4 x 5 µm along +x."""
+    load = tb.Slide(force=F, distance=4 * FLAT_STEP, steps=4, compress_steps=1)
+    return run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_UP, MU_LOW), load)
+
+
+def test_a_flat_ellipsoid_cannot_roll_and_slides_on_the_plate_with_the_smaller_mu(flat_run):
+    """Rolling would tilt it, and a tilt θ needs the tangential force ξ(θ) F_N, which grows
+    from 0 as 24 θ (ξ'(0) = (A² − C²)/C²): once ξ reaches μ_low = 0.3 (θ* = 0.70°, some 5 µm
+    of rolling, θ* h) it cannot roll on and slides on the lower plate, stuck to the upper one.
+    From then on (the last two steps): μ_eff = μ_min (measured 0.300003; it resists: F_T, the
+    particles' force on the upper plate, points along −x), the lower contact slides and the
+    upper sticks, the particle moves with the upper plate (Δs per step) without turning, its
+    tilt is where the rigid ellipse's ξ is μ_min (measured 0.2916: 3 %, the deformable
+    contacts) and the dilatancy is the rigid ellipse's gap change at that tilt (measured 2.4 %
+    more)."""
+    ds = flat_run
+    settled = slice(3, 5)
+    assert ds.mu_eff_sliding.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
+    assert ds.mu_eff.sel(component="x").values[settled] == pytest.approx(-MU_LOW, rel=1e-4)
+    assert ds.mu_eff_magnitude.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
+    steps = ds.contact_step.values
+    for k in (3, 4):
+        state = dict(zip(ds.contact_j.values[steps == k], ds.contact_state.values[steps == k],
+                         strict=True))
+        assert state == {-1: tb.schema.CONTACT_STATES.index("slide"),
+                         -2: tb.schema.CONTACT_STATES.index("stick")}
+    move = sliding(ds, "translation").values[settled]
+    assert move[:, 0] == pytest.approx(FLAT_STEP, rel=1e-3)
+    h = ds.plate_gap.values[-1]
+    turn = np.radians(sliding(ds, "rotation").values[settled])
+    assert np.abs(turn).max() < 1e-3 * FLAT_STEP / h
+    theta = math.radians(float(sliding(ds, "orientation").sel(component="y").values[-1]))
+    assert rigid_ratio(theta) == pytest.approx(MU_LOW, rel=0.05)
+    # it can roll no further: the rigid rolling that reaches μ_min is a fraction of the slide
+    assert theta * h < 0.5 * 4 * FLAT_STEP
+    assert ds.dilatancy.values[-1] == pytest.approx(rigid_gap(theta) - rigid_gap(0.0), rel=0.05)
+    # steady sliding: no more dilatancy (measured 4e-14 m, 5e-8 of it)
+    assert ds.dilatancy.values[-1] == pytest.approx(ds.dilatancy.values[-2], rel=1e-5)
+
+
+@pytest.mark.slow
+def test_a_flat_ellipsoid_slides_on_the_upper_plate_when_its_mu_is_the_smaller():
+    """The plates' μ swapped (μ_up 0.3 < μ_low 0.6): once sliding, μ_eff = μ_up and the
+    particle stays on the lower plate (it moves by less than 1 % of Δs per step)."""
+    load = tb.Slide(force=F, distance=4 * FLAT_STEP, steps=4, compress_steps=1)
+    ds = run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_LOW, MU_UP), load)
+    settled = slice(3, 5)
+    assert ds.mu_eff_sliding.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
+    move = sliding(ds, "translation").values[settled]
+    assert np.abs(move[:, 0]).max() < 0.01 * FLAT_STEP
