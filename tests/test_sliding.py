@@ -359,7 +359,6 @@ def test_a_flat_ellipsoid_cannot_roll_and_slides_on_the_plate_with_the_smaller_m
     assert ds.dilatancy.values[-1] == pytest.approx(ds.dilatancy.values[-2], rel=1e-5)
 
 
-@pytest.mark.slow
 def test_a_flat_ellipsoid_slides_on_the_upper_plate_when_its_mu_is_the_smaller():
     """The plates' μ swapped (μ_up 0.3 < μ_low 0.6): once sliding, μ_eff = μ_up and the
     particle stays on the lower plate (it moves by less than 1 % of Δs per step)."""
@@ -369,3 +368,40 @@ def test_a_flat_ellipsoid_slides_on_the_upper_plate_when_its_mu_is_the_smaller()
     assert ds.mu_eff_sliding.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
     move = sliding(ds, "translation").values[settled]
     assert np.abs(move[:, 0]).max() < 0.01 * FLAT_STEP
+
+
+# --- g: the figure -----------------------------------------------------------------------------
+def test_the_shear_figure_draws_mu_eff_and_the_dilatancy_against_the_sliding_distance(
+        sphere_run, flat_run):
+    """From the end of the compression (s = 0, dilatancy 0): μ_eff along the sliding (there,
+    the particles' resistance to the first increment's direction) and the dilatancy in µm,
+    against the plate's path length in µm; the reversal of the sphere's run marked at 30 µm."""
+    pytest.importorskip("matplotlib")
+    from thirdbody import plot
+
+    ds = flat_run
+    fig = plot.shear_curve(ds)
+    top, bottom = fig.axes[:2]
+    s, mu = next(ln for ln in top.get_lines() if "along" in ln.get_label()).get_data()
+    assert s == pytest.approx(1e6 * FLAT_STEP * np.arange(5))
+    F_T = ds.plate_force.sel(component="x").values
+    assert mu[0] == pytest.approx(-F_T[0] / F, abs=1e-12)
+    assert mu[1:] == pytest.approx(ds.mu_eff_sliding.values[1:])
+    assert mu[-1] == pytest.approx(MU_LOW, rel=1e-4)
+    s, dilatancy = next(ln for ln in bottom.get_lines() if len(ln.get_xdata()) > 2).get_data()
+    assert dilatancy == pytest.approx(np.concatenate([[0.0], 1e6 * ds.dilatancy.values[1:]]))
+    assert not [ln for ln in top.get_lines() if ln.get_gid() == "reversal"]
+    fig = plot.shear_curve(sphere_run)
+    marks = [ln.get_xdata()[0] for ax in fig.axes[:2] for ln in ax.get_lines()
+             if ln.get_gid() == "reversal"]
+    assert marks == pytest.approx([1e6 * 3 * STEP] * 2)
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
+def test_save_all_adds_the_shear_figure_to_a_sliding_run(sphere_run, tmp_path):
+    from thirdbody import plot
+
+    written = plot.save_all(sphere_run, tmp_path, formats=("png",))
+    assert sorted(p.name for p in written) == ["orientation.png", "shear.png", "state.png"]
