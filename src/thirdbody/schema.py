@@ -12,7 +12,7 @@ single particle), ``interface`` = (upper, lower), ``component`` = (x, y) for hor
 ``map_i`` of each particle's lattice, with the cell centres in metres as the coordinates
 ``map_x`` (particle, map_i) and ``map_y`` (particle, map_j) in the particle frame (centroid at
 the origin); the ``event`` table; ``case`` stands for a sweep's axes. Units follow UDUNITS
-spelling (``m``, ``N``, ``Pa``, ``m2``, ``degree``, ``s``; ``1`` for dimensionless).
+spelling (``m``, ``N``, ``Pa``, ``m2``, ``J``, ``degree``, ``s``; ``1`` for dimensionless).
 """
 
 from __future__ import annotations
@@ -255,6 +255,20 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("dilatancy", "step", "m",
        "change of the plate gap since the end of the compression (the last step before the "
        "plate first slid): > 0 when the layer dilates (NaN before the plate slides)"),
+    # --- the energy balance of a network run's step (design notes §3d) --------------------
+    _v("plate_work", "step", "J",
+       "network runs: work of the upper plate on the particles in the step, F . du with F its "
+       "force on them (the mean of the step's start and end) and du = (ds_x, ds_y, dh): "
+       "-plate_force . ds - F_N dh"),
+    _v("elastic_energy", "step", "J",
+       "network runs: elastic energy stored in every contact at the end of the step, "
+       "1/2 sum (p u_n + tau . u_t) dA"),
+    _v("dissipation", "step", "J",
+       "network runs: frictional dissipation of every contact in the step, sum tau . "
+       "slip increment dA (>= 0 but for rounding); contact_dissipation splits it by contact"),
+    _v("energy_residual", "step", "1",
+       "network runs: (plate_work - change of elastic_energy - dissipation) / (F_N (|ds| + "
+       "|dh|)): the step's energy balance (NaN when the plate did not move)"),
     _v("share_error", "step", "1", "largest error of a particle's share of F_N accepted by the "
                                    "load sharing in the step (converged: <= 1e-7)"),
     _v("time_total", "step", "s", "wall time of the step"),
@@ -362,6 +376,10 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
        "contact radius over the smallest radius of curvature of the two surfaces (the "
        "half-space approximation's measure)"),
     _v("contact_mu", "contact", "1", "friction coefficient of the contact"),
+    _v("contact_elastic_energy", "contact", "J", "elastic energy stored in the contact at the "
+                                                 "end of the step"),
+    _v("contact_dissipation", "contact", "J", "frictional dissipation of the contact in the "
+                                              "step (>= 0 but for rounding)"),
     # --- maps --------------------------------------------------------------------------------
     _v("pressure", "map_step particle interface map_j map_i", "Pa", "contact pressure",
        fill=0.0),

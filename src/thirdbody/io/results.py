@@ -193,7 +193,11 @@ _NETWORK_ERA = {"fraction_slide": 0.0, "plate_normal_force": None, "translation"
                 # sliding_distance 0, mu_eff_sliding and dilatancy NaN); mu_eff from its
                 # plate_force and total_force
                 "plate_shift": None, "sliding_distance": None, "mu_eff": None,
-                "mu_eff_magnitude": None, "mu_eff_sliding": None, "dilatancy": None}
+                "mu_eff_magnitude": None, "mu_eff_sliding": None, "dilatancy": None,
+                # the energy balance of a network run's step (NaN before it)
+                "plate_work": None, "elastic_energy": None, "dissipation": None,
+                "energy_residual": None, "contact_elastic_energy": None,
+                "contact_dissipation": None}
 
 
 def _added_variables(ds):
@@ -209,7 +213,8 @@ def _added_variables(ds):
     added = {}
     for name in _NETWORK_ERA:
         var = schema.VARIABLES[name]
-        if name in ds.variables or ("particle" in var.dims and "particle" not in ds.dims):
+        if name in ds.variables or any(d not in ds.dims for d in var.dims[:2]
+                                       if d in ("particle", "contact")):
             continue
         lead = tuple(ds.sizes[d] for d in var.dims[:2 if var.kind == "particle" else 1])
         if var.name == "plate_normal_force" and "normal_force" in ds:

@@ -207,7 +207,8 @@ class NetworkEngine:
             bodies, histories = wrap(bodies, histories, self.box)
         displacement = state.displacement + result.translation
         sliding = _Sliding.after(state, step)
-        record = self._record(k, step, result, starts, displacement, sliding,
+        energy = self._energy(step, state, result)
+        record = self._record(k, step, result, starts, displacement, sliding, energy,
                               time.perf_counter() - t0)
         state.bodies, state.histories, state.gap = bodies, histories, result.gap
         state.displacement = displacement
@@ -215,9 +216,35 @@ class NetworkEngine:
          state.slide_direction) = sliding
         return record
 
+    # --- the step's energy --------------------------------------------------------------------
+    def _energy(self, step: LoadStep, state: NetworkState, result: ClusterResult) -> dict:
+        """The step's energy balance (design notes §3d): the upper plate's work on the
+        particles W = F̄ · Δu (trapezoid: F̄ the mean of its force on them at the start and the
+        end of the step, Δu = (Δs_x, Δs_y, Δh); so W = F_T·Δs − F_N·Δh with F_T the plate's
+        tangential force on them), the stored elastic energy E of every contact at the end,
+        their frictional dissipation D in the step, and the residual (W − ΔE − D) over
+        F_N (|Δs| + |Δh|) (:func:`_contact_energy`). The step's start is the state's histories
+        (the first step: no contact, the gap d₀)."""
+        start = [h.solved for h in state.histories.values()]
+        upper = [c.force for c in start if getattr(c, "side", None) == "upper"]
+        force0 = np.array([math.fsum(f[d] for f in upper) for d in range(3)])
+        gap0 = self.d0 if state.gap is None else state.gap
+        move = np.array([*step.shift, result.gap - gap0], dtype=float)
+        mean = 0.5 * (force0 + np.asarray(result.plate_force, dtype=float))
+        work = math.fsum(mean * move)
+        stored0 = math.fsum(_contact_energy(c)[0] for c in start)
+        ends = [_contact_energy(h.solved) for h in result.histories.values()]
+        stored = math.fsum(e[0] for e in ends)
+        dissipated = math.fsum(e[1] for e in ends)
+        scale = result.normal_force * (math.hypot(*step.shift) + abs(move[2]))
+        residual = ((work - (stored - stored0) - dissipated) / scale if scale > 0
+                    else math.nan)
+        return dict(plate_work=work, elastic_energy=stored, dissipation=dissipated,
+                    energy_residual=residual)
+
     # --- the step's records ------------------------------------------------------------------
     def _record(self, k: int, step: LoadStep, result: ClusterResult, starts, displacement,
-                sliding: _Sliding, seconds: float) -> LayerRecord:
+                sliding: _Sliding, energy: dict, seconds: float) -> LayerRecord:
         n = len(result.bodies)
         plate = {i: {} for i in range(n)}
         touching = [[] for _ in range(n)]          # each particle's loaded contacts
@@ -260,6 +287,7 @@ class NetworkEngine:
             plate_moment=schema.VARIABLES["plate_moment"].blank(),
             plate_shift=sliding.plate_shift, sliding_distance=sliding.distance,
             mu_eff_sliding=sliding.along(result), dilatancy=sliding.dilatancy(result.gap),
+            **energy,
             network_residual=result.residual, network_iterations=result.iterations,
             share_error=0.0, time_total=seconds)
         for var in schema.by_kind("step"):
@@ -269,7 +297,7 @@ class NetworkEngine:
             if var.derive is not None:
                 for r in records:
                     r.values[var.name] = var.derive(r.values)
-        rows = [self._row(k, c) for c in result.contacts]
+        rows = [self._row(k, c, result.histories[c.key].solved) for c in result.contacts]
         return LayerRecord(k, step.kind, records, values, contacts=rows)
 
     def _particle(self, k: int, step: LoadStep, i: int, body: Body, result: ClusterResult,
@@ -330,8 +358,9 @@ class NetworkEngine:
             turn_evaluations=result.iterations)
         return StepRecord(k, step.kind, values, gap=result.gap)
 
-    def _row(self, k: int, c) -> dict:
+    def _row(self, k: int, c, solved) -> dict:
         image = (0, 0) if isinstance(c.j, str) else tuple(int(v) for v in c.key[2])
+        stored, dissipated = _contact_energy(solved)
         return {
             "contact_step": k, "contact_i": int(c.i),
             "contact_j": PLATE_INDEX[c.j] if isinstance(c.j, str) else int(c.j),
@@ -347,4 +376,21 @@ class NetworkEngine:
             "contact_state": c.state,
             "contact_half_space_ratio": float(c.half_space_ratio),
             "contact_mu": float(c.mu),
+            "contact_elastic_energy": stored, "contact_dissipation": dissipated,
         }
+
+
+def _contact_energy(solved) -> tuple[float, float]:
+    """A solved contact's stored elastic energy ½ Σ (p u_n + τ·u_t) ΔA and the frictional
+    dissipation of its last step Σ τ·w ΔA, J (p, τ its pressure and traction, u_n, u_t the
+    elastic displacements they cause, w the cells' slip increment in the step; τ and w are
+    what the plate, or body b, exerts on the particle, or body a, and its slip over it, so
+    that τ·w >= 0 cell by cell). Both are sums over the contact's window, in its own frame."""
+    normal, tangential = solved.normal_solution, solved.tangential_solution
+    area = normal.grid.cell_area
+    stored = math.fsum((normal.pressure * normal.displacement).ravel())
+    dissipated = 0.0
+    if tangential is not None:
+        stored += math.fsum((tangential.traction * tangential.displacement).ravel())
+        dissipated = math.fsum((tangential.traction * tangential.slip_increment).ravel())
+    return 0.5 * stored * area, dissipated * area
