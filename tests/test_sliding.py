@@ -18,6 +18,7 @@ file takes a few seconds; each tolerance is the measured error with headroom, st
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 import warnings
@@ -105,6 +106,19 @@ def test_the_particle_model_refuses_to_slide_and_says_why():
                                          r"network engine can do: give mu_pp"):
         tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5),
                       tb.Slide(force=F, distance=1e-5))
+
+
+def test_a_program_that_slides_before_pressing_stops_the_run_and_says_why():
+    @dataclasses.dataclass(frozen=True)
+    class SlideFirst(tb.loading.LoadProgram):
+        def schedule(self):
+            return [tb.loading.LoadStep("force", F, (STEP, 0.0))]
+
+    sim = tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), SlideFirst(), mu_pp=0.3,
+                        resolution=20)
+    with pytest.warns(tb.SimulationStoppedWarning):
+        sim.run()
+    assert "slides in the first load step: compress the layer first" in sim.status
 
 
 # --- b: the configuration ----------------------------------------------------------------------
@@ -454,3 +468,15 @@ def test_a_sliding_flat_ellipsoid_dissipates_mu_min_f_n_per_unit_slid(flat_run):
     assert abs(ds.energy_residual.values[1]) < 0.01
     assert abs(ds.energy_residual.values[2]) < 0.05
     assert (ds.contact_dissipation.values >= -1e-20).all()
+
+
+def test_the_bundled_shear_example_is_a_slide_out_and_back():
+    from importlib import resources
+
+    from thirdbody.io import load_config
+
+    path = resources.files("thirdbody") / "examples" / "shear_ellipsoid.toml"
+    _, plates, load, numerics = load_config(path).build()
+    assert isinstance(load, tb.Slide) and load.force == 1.0
+    assert load.path == [(20e-6, 0.0), (0.0, 0.0), (-20e-6, 0.0), (0.0, 0.0)]
+    assert (plates.mu_up, plates.mu_low) == (0.6, 0.3) and numerics["mu_pp"] == 0.3

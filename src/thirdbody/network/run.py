@@ -9,6 +9,14 @@ result becomes the step's :class:`~thirdbody.records.LayerRecord`: the plates' t
 particle's variables (pose, turn, plate forces and contacts, state) and a row of the ``contact``
 table per contact (:mod:`thirdbody.schema`, kind "contact").
 
+**Sliding plates** (design notes §3d, :class:`~thirdbody.loading.Slide`): a step whose
+:attr:`~thirdbody.loading.LoadStep.shift` is not zero moves the upper plate horizontally by it
+(``plate_shift`` of :func:`solve_cluster`); the state carries the plate's position, its path
+length and the gap at the end of the compression, and the step records them with the effective
+friction (``mu_eff``, ``mu_eff_sliding``) and the dilatancy. Every step also records its energy
+balance: the upper plate's work on the particles, the contacts' stored elastic energy and their
+frictional dissipation, and the residual (:meth:`NetworkEngine._energy`).
+
 Conventions as in :mod:`~thirdbody.network.cluster`: SI units, the lower plate at z = 0 and the
 upper one at z = h. Horizontal positions in the records are the layer's (``x0``, ``y0`` as
 placed, ``position`` the centroid's displacement since, not wrapped into a periodic box);
@@ -198,6 +206,7 @@ class NetworkEngine:
             load = {"force": step.value, "gap_start": state.gap}
         else:
             load = {"gap": self.d0 * (1.0 - step.value)}
+        sliding = _Sliding.after(state, step)           # refuses a slide before any load
         result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
                                mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
                                plate_shift=step.shift, numerics=self.numerics, **load)
@@ -206,7 +215,6 @@ class NetworkEngine:
         if self.box is not None:
             bodies, histories = wrap(bodies, histories, self.box)
         displacement = state.displacement + result.translation
-        sliding = _Sliding.after(state, step)
         energy = self._energy(step, state, result)
         record = self._record(k, step, result, starts, displacement, sliding, energy,
                               time.perf_counter() - t0)
