@@ -41,7 +41,7 @@ def test_a_coarse_cell_size_is_named_as_set():
      "particle.shape: required key missing (one of 'sphere', 'ellipsoid', 'potato', 'mesh')"),
     ('program = "linear_ramp"', 'kind = "linear_ramp"',
      "load.program: required key missing (one of 'linear_ramp', 'hold_then_ramp', "
-     "'force_table', 'gap_ramp')"),
+     "'force_table', 'gap_ramp', 'slide')"),
     ("E = 1.0e9", "E = -1.0", "particle.E = -1.0: must be > 0.0"),
     ("orientation_deg = 20.0", "orientation_deg = 20.0\nquaternion = [0.0, 0.0, 0.0, 1.0]",
      "particle: give either a tilt (orientation_deg, tilt_axis_deg, yaw_deg) or a quaternion, "

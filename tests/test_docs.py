@@ -81,7 +81,8 @@ def test_the_configuration_tables_list_every_key_of_the_models():
     text = _hook("config_table").config_tables()
     models = [c.Particle, c.PlacedParticle, c.LayerGenerator, c.Plates, c.Numerics,
               c.SphereShape, c.EllipsoidShape, c.PotatoShape, c.MeshShapeConfig,
-              c.LinearRampLoad, c.HoldThenRampLoad, c.ForceTableLoad, c.GapRampLoad]
+              c.LinearRampLoad, c.HoldThenRampLoad, c.ForceTableLoad, c.GapRampLoad,
+              c.SlideLoad]
     for model in models:
         for name in model.model_fields:
             if name != "geometry":

@@ -101,6 +101,23 @@ def test_column_of_two_spheres_is_three_hertz_contacts_in_series():
     assert errors[1] < 0.3 * errors[0]                              # measured 0.17
 
 
+def test_contact_windows_do_not_grow_from_step_to_step():
+    """The column held at F_N for two more steps, the upper plate sliding 5 µm a step: every
+    contact's window stays what the first step made it (each step's window holds the cells its
+    history occupies, not the last window with its free margin: that grew every window by 8
+    cells a step, and a long run's cost with it)."""
+    first = solve_cluster(column(), mu_up=0.5, mu_low=0.5, mu_pp=0.5, force=F,
+                          numerics=COARSE)
+    shapes = {h.key: h.solved.pressure.shape for h in first.histories.values()}
+    result = first
+    for _ in range(2):
+        result = solve_cluster(list(result.bodies), result.histories, mu_up=0.5, mu_low=0.5,
+                               mu_pp=0.5, force=F, gap_start=result.gap,
+                               plate_shift=(5e-6, 0.0), numerics=COARSE)
+        check_balanced(result)
+        assert {h.key: h.solved.pressure.shape for h in result.histories.values()} == shapes
+
+
 def test_a_sphere_above_its_neighbour_comes_down_to_it():
     """The upper sphere starts 5 µm (a third of the contact's approach) above the lower one: the
     Newton step must know the open contact (broad phase beyond the bounding spheres, the

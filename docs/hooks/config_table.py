@@ -81,6 +81,8 @@ MEANINGS: dict[str, str] = {
     "load.force_table.forces": "the normal force of every step",
     "load.gap_ramp.steps": "load steps",
     "load.gap_ramp.start": "first step's compression (default: stop / steps)",
+    "load.slide.compress_steps": "steps of the compression (equal increments up to force "
+                                 "or compression) before the plate slides",
     "numerics.resolution": "cells per particle size (the largest centroid–surface distance)",
     "numerics.tol": "tolerance of the contact solvers (dimensionless residuals)",
     "numerics.angle_step_deg": "turning: march step along a turn",

@@ -14,6 +14,7 @@ Public API::
     Simulation(particle, plates, LinearRamp(stop=F, steps=n)).run() -> xarray.Dataset
     Layer([PlacedParticle(particle, (x, y)), ...]), Layer.random(...)   many particles
     Simulation(layer, plates, load).run()  -> the same dataset form, along (step, particle)
+    Simulation(layer, plates, Slide(force=F, distance=s), mu_pp=...)   sliding plates
     particle_view(ds, i)                one particle's results (no particle dimension)
     schema.VARIABLES                    every output variable: dims, units, long name
 """
@@ -37,7 +38,7 @@ from .bem import (
     solve_tangential,
 )
 from .layer import Layer, LayerError, PlacedParticle
-from .loading import ForceTable, GapRamp, HoldThenRamp, LinearRamp
+from .loading import ForceTable, GapRamp, HoldThenRamp, LinearRamp, Slide
 from .material import Material
 from .particle import Particle, Plates
 from .records import particle_view
@@ -62,6 +63,7 @@ __all__ = [
     "Simulation",
     "SimulationError",
     "SimulationStoppedWarning",
+    "Slide",
     "TangentialContact",
     "__version__",
     "citations",

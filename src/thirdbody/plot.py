@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["contact_maps", "layer_top_view", "load_shares", "orientation_history",
-           "particle_ratios", "quantity_label", "save_all", "save_state_map", "state_curve",
-           "state_fractions", "state_map"]
+           "particle_ratios", "quantity_label", "save_all", "save_state_map", "shear_curve",
+           "slides", "state_curve", "state_fractions", "state_map"]
 
 _STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
 
@@ -340,11 +340,16 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
                    "particle_ratios": particle_ratios(ds)}
         if "contact" in ds.dims:
             figures["contact_network"] = contact_network(ds)
+        if slides(ds):
+            figures["shear"] = shear_curve(ds)
         return _save_figures(plt, figures, out, formats)
+    whole = ds
     ds = _one(ds)
     figures = {"state": state_curve(ds, labels), "orientation": orientation_history(ds)}
     if "map_step" in ds.dims and ds.sizes["map_step"]:
         figures["contact_maps"] = contact_maps(ds, map_steps)
+    if slides(whole):
+        figures["shear"] = shear_curve(whole)
     return _save_figures(plt, figures, out, formats)
 
 
@@ -814,6 +819,64 @@ def contact_network(ds):
     right.set_ylabel("normal force of the upper plate (N)")
     right.legend(fontsize=8)
     fig.suptitle(f"contact network: {_layer_title(ds)}", fontsize=10)
+    return fig
+
+
+def slides(ds) -> bool:
+    """The upper plate of the run slid (a :class:`~thirdbody.loading.Slide` program)."""
+    return "sliding_distance" in ds and bool(np.nanmax(ds.sliding_distance.values,
+                                                       initial=0.0) > 0)
+
+
+def shear_curve(ds):
+    """The shear test: the effective friction (top) and the dilatancy (bottom) against the
+    sliding distance (the path length of the upper plate, µm), from the end of the compression
+    (s = 0, dilatancy 0). μ_eff is drawn along the sliding (``mu_eff_sliding``: > 0 where the
+    layer resists the plate's motion) and as a magnitude |F_T|/F_N (dashed); dotted vertical
+    lines mark where the plate changed direction (a reversal or a corner of its path)."""
+    plt = _plt()
+    distance = ds.sliding_distance.values
+    moving = np.flatnonzero(distance > 0)
+    first = int(moving[0])
+    start = max(first - 1, 0)                   # the end of the compression
+    shift = ds.plate_shift.transpose("step", "component").values
+    increments = np.diff(shift, axis=0, prepend=shift[:1] * 0.0)
+    e0 = increments[first] / np.linalg.norm(increments[first])
+    mu_vector = ds.mu_eff.transpose("step", "component").values
+    along = ds.mu_eff_sliding.values.astype(float).copy()
+    along[start] = -float(mu_vector[start] @ e0) if start < first else along[start]
+    dilatancy = np.nan_to_num(ds.dilatancy.values.astype(float))
+    rows = slice(start, None)
+    s = distance[rows] * 1e6
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.6), sharex=True,
+                                      constrained_layout=True)
+    top.axhline(0.0, color="0.6", lw=0.8)
+    top.plot(s, along[rows], "o-", color="C0", ms=3, label=r"$\mu_\mathrm{eff}$ along the "
+                                                         "sliding (> 0: resisting)")
+    top.plot(s, ds.mu_eff_magnitude.values[rows], "--", color="C1",
+             label=r"$|F_T|/F_N$")
+    for name, colour in (("mu_up", "C2"), ("mu_low", "C3")):
+        mu = _inputs(ds).get(name)
+        if mu is not None:
+            top.axhline(mu, color=colour, lw=0.8, ls=":",
+                        label=rf"$\mu_\mathrm{{{name[3:]}}}$ = {mu:g}")
+    top.set_ylabel(r"effective friction $\mu_\mathrm{eff}$")
+    top.legend(fontsize=8)
+    bottom.axhline(0.0, color="0.6", lw=0.8)
+    bottom.plot(s, dilatancy[rows] * 1e6, "o-", color="k", ms=3)
+    bottom.set_ylabel(r"dilatancy $h - h_c$ (µm)")
+    bottom.set_xlabel("sliding distance (µm, path length of the upper plate)")
+    # a change of direction: an increment not along the one before
+    steps = increments[first:]
+    norms = np.linalg.norm(steps, axis=1)
+    for k in range(1, len(steps)):
+        if norms[k] > 0 and norms[k - 1] > 0 and (
+                steps[k] @ steps[k - 1] < (1 - 1e-9) * norms[k] * norms[k - 1]):
+            for ax in (top, bottom):
+                ax.axvline(distance[first + k - 1] * 1e6, color="0.5", lw=0.8, ls=":",
+                           gid="reversal")
+    title = _layer_title(ds) if ds.sizes.get("particle", 1) > 1 else _title(_one(ds))
+    fig.suptitle(f"shear: {title}", fontsize=10)
     return fig
 
 

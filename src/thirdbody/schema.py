@@ -12,7 +12,7 @@ single particle), ``interface`` = (upper, lower), ``component`` = (x, y) for hor
 ``map_i`` of each particle's lattice, with the cell centres in metres as the coordinates
 ``map_x`` (particle, map_i) and ``map_y`` (particle, map_j) in the particle frame (centroid at
 the origin); the ``event`` table; ``case`` stands for a sweep's axes. Units follow UDUNITS
-spelling (``m``, ``N``, ``Pa``, ``m2``, ``degree``, ``s``; ``1`` for dimensionless).
+spelling (``m``, ``N``, ``Pa``, ``m2``, ``J``, ``degree``, ``s``; ``1`` for dimensionless).
 """
 
 from __future__ import annotations
@@ -175,6 +175,17 @@ class Variable:
         return np.array(values, dtype=self.dtype).reshape((*lead, *self.shape))
 
 
+def _ratio(vector, scale: float) -> tuple[float, float]:
+    """``vector`` / ``scale`` componentwise (NaN where ``scale`` is not > 0)."""
+    if not scale > 0:
+        return (math.nan, math.nan)
+    return (float(vector[0]) / scale, float(vector[1]) / scale)
+
+
+def _magnitude(vector) -> float:
+    return math.hypot(float(vector[0]), float(vector[1]))
+
+
 def _v(name: str, dims: str, units: str, long_name: str, **kw) -> Variable:
     return Variable(name, tuple(dims.split()), units, long_name, **kw)
 
@@ -205,7 +216,8 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("fraction_rotate", "step", "1", "fraction of the loaded particles that rotated about "
                                        "their centroid", summary=True),
     _v("plate_force", "step component", "N",
-       "net tangential force of the particles on the upper plate (minus that on the lower)"),
+       "F_T: net tangential force of the particles on the upper plate (minus that on the "
+       "lower); under sliding it points against the plate's motion when the layer resists it"),
     _v("plate_moment", "step component", "N m",
        "tilting moment of the particles' forces on the upper plate, about the origin on the "
        "lower plate"),
@@ -224,6 +236,39 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
        "contact force, moments over it times the particle's size, the plate force over F_N)"),
     _v("network_iterations", "step", "1", "network runs: BEM passes over every contact in the "
                                           "step", dtype="int64", fill=0),
+    # --- sliding plates (design notes §3d; loading.Slide) ---------------------------------
+    _v("plate_shift", "step component", "m",
+       "s: horizontal displacement of the upper plate relative to the lower one since the "
+       "start of the run, at the end of the step", fill=0.0),
+    _v("sliding_distance", "step", "m", "path length the upper plate has slid since the start "
+                                        "of the run (the sum of |increment|)", fill=0.0),
+    _v("mu_eff", "step component", "1",
+       "effective friction vector F_T / F_N (plate_force / total_force): points against the "
+       "sliding when the layer resists it",
+       derive=lambda v: _ratio(v["plate_force"], v["total_force"])),
+    _v("mu_eff_magnitude", "step", "1", "effective friction |F_T| / F_N (>= 0)",
+       derive=lambda v: _magnitude(_ratio(v["plate_force"], v["total_force"]))),
+    _v("mu_eff_sliding", "step", "1",
+       "effective friction along the sliding: -F_T . e / F_N, e the direction of the last "
+       "sliding increment; > 0 when the layer resists the sliding, < 0 when it pushes the "
+       "plate along (NaN before the plate first slides)"),
+    _v("dilatancy", "step", "m",
+       "change of the plate gap since the end of the compression (the last step before the "
+       "plate first slid): > 0 when the layer dilates (NaN before the plate slides)"),
+    # --- the energy balance of a network run's step (design notes §3d) --------------------
+    _v("plate_work", "step", "J",
+       "network runs: work of the upper plate on the particles in the step, F . du with F its "
+       "force on them (the mean of the step's start and end) and du = (ds_x, ds_y, dh): "
+       "-plate_force . ds - F_N dh"),
+    _v("elastic_energy", "step", "J",
+       "network runs: elastic energy stored in every contact at the end of the step, "
+       "1/2 sum (p u_n + tau . u_t) dA"),
+    _v("dissipation", "step", "J",
+       "network runs: frictional dissipation of every contact in the step, sum tau . "
+       "slip increment dA (>= 0 but for rounding); contact_dissipation splits it by contact"),
+    _v("energy_residual", "step", "1",
+       "network runs: (plate_work - change of elastic_energy - dissipation) / (F_N (|ds| + "
+       "|dh|)): the step's energy balance (NaN when the plate did not move)"),
     _v("share_error", "step", "1", "largest error of a particle's share of F_N accepted by the "
                                    "load sharing in the step (converged: <= 1e-7)"),
     _v("time_total", "step", "s", "wall time of the step"),
@@ -331,6 +376,10 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
        "contact radius over the smallest radius of curvature of the two surfaces (the "
        "half-space approximation's measure)"),
     _v("contact_mu", "contact", "1", "friction coefficient of the contact"),
+    _v("contact_elastic_energy", "contact", "J", "elastic energy stored in the contact at the "
+                                                 "end of the step"),
+    _v("contact_dissipation", "contact", "J", "frictional dissipation of the contact in the "
+                                              "step (>= 0 but for rounding)"),
     # --- maps --------------------------------------------------------------------------------
     _v("pressure", "map_step particle interface map_j map_i", "Pa", "contact pressure",
        fill=0.0),

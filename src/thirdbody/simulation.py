@@ -92,7 +92,8 @@ class Simulation:
     plates : Plates
     load : LoadProgram
         See :mod:`thirdbody.loading`. For a layer the force is the total F_N on each plate, and
-        compression ratios are relative to d₀ = the tallest particle's height.
+        compression ratios are relative to d₀ = the tallest particle's height. A program that
+        slides the upper plate (:class:`~thirdbody.loading.Slide`) needs ``mu_pp``.
     resolution : float
         Cells per particle size (the largest centroid-to-surface distance): each particle's cell
         size is ``shape.size / resolution`` (m). Ignored if ``cell_size`` is given.
@@ -216,6 +217,11 @@ class Simulation:
         self.mu_pp, self.box, self.network = None, None, None
         if mu_pp is not None and box is None and getattr(self.layer, "periodic", False):
             box = self.layer.box                # Layer.random(..., periodic=True)
+        if mu_pp is None and self.load.slides:
+            raise ValueError(
+                f"load ({type(load).__name__}) slides the upper plate sideways, which only the "
+                "network engine can do: give mu_pp (network.mu_pp, the friction between "
+                "particles; a single particle is a network of one)")
         if mu_pp is None and box is not None:
             raise ValueError("box (network.box) needs mu_pp (network.mu_pp): a periodic box is "
                              "a property of a network of touching particles")

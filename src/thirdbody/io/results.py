@@ -188,13 +188,23 @@ def upgrade(ds):
 #: (None: the variable's blank)
 _NETWORK_ERA = {"fraction_slide": 0.0, "plate_normal_force": None, "translation": None,
                 "particle_contacts": None, "coordination": None, "both_plates_force": None,
-                "network_residual": None, "network_iterations": None}
+                "network_residual": None, "network_iterations": None,
+                # sliding plates: a file written before them never slid (plate_shift and
+                # sliding_distance 0, mu_eff_sliding and dilatancy NaN); mu_eff from its
+                # plate_force and total_force
+                "plate_shift": None, "sliding_distance": None, "mu_eff": None,
+                "mu_eff_magnitude": None, "mu_eff_sliding": None, "dilatancy": None,
+                # the energy balance of a network run's step (NaN before it)
+                "plate_work": None, "elastic_energy": None, "dissipation": None,
+                "energy_residual": None, "contact_elastic_energy": None,
+                "contact_dissipation": None}
 
 
 def _added_variables(ds):
     """``ds`` with the variables of :data:`_NETWORK_ERA` it lacks, as a run of the layer model
     has them today: ``plate_normal_force`` is ``normal_force`` at both plates,
-    ``fraction_slide`` 0, the others their blank (NaN, or 0 for counts). Any other missing
+    ``fraction_slide`` 0, ``mu_eff`` (and its magnitude) ``plate_force`` / ``total_force``,
+    the others their blank (NaN, or 0 for counts and the plate's shift). Any other missing
     variable stays missing (the reader that needs it says so)."""
     from .. import schema
 
@@ -203,12 +213,20 @@ def _added_variables(ds):
     added = {}
     for name in _NETWORK_ERA:
         var = schema.VARIABLES[name]
-        if name in ds.variables or ("particle" in var.dims and "particle" not in ds.dims):
+        if name in ds.variables or any(d not in ds.dims for d in var.dims[:2]
+                                       if d in ("particle", "contact")):
             continue
         lead = tuple(ds.sizes[d] for d in var.dims[:2 if var.kind == "particle" else 1])
         if var.name == "plate_normal_force" and "normal_force" in ds:
             F = ds.normal_force.transpose("step", "particle").values
             values = np.repeat(F[..., None], 2, axis=-1)
+        elif var.name in ("mu_eff", "mu_eff_magnitude") and {"plate_force",
+                                                             "total_force"} <= set(ds):
+            force = ds.plate_force.transpose("step", "component").values
+            total = ds.total_force.values
+            rows = [var.derive({"plate_force": f, "total_force": float(t)})
+                    for f, t in zip(force, total, strict=True)]
+            values = var.array(rows, lead)
         else:
             fill = _NETWORK_ERA.get(var.name)
             count = int(np.prod(lead))

@@ -498,9 +498,21 @@ class _Carry:
         twist = (0.0 if previous.tangential_solution is None
                  else float(previous.tangential_solution.twist)) + relative
         shift = frame.apply(moved[1] - moved[0])[:2]
-        # the new lattice cells that cover the previous window (the history lives there)
+        # the new lattice cells that cover the cells the history occupies (its pressure and
+        # traction; the whole previous window, margin included, would grow the next window by
+        # its margin every step)
         old = previous.grid
-        corners = np.array([[x, y] for x in (old.x[0], old.x[-1]) for y in (old.y[0], old.y[-1])])
+        fields = [previous.pressure]
+        if previous.tangential_solution is not None:
+            fields.append(previous.tangential_solution.traction)
+        live = np.zeros(previous.pressure.shape, dtype=bool)
+        for f in fields:
+            live |= (np.asarray(f) != 0).reshape(-1, *live.shape).any(axis=0)
+        if not live.any():
+            live[:] = True
+        rows, cols = np.flatnonzero(live.any(axis=1)), np.flatnonzero(live.any(axis=0))
+        xs, ys = (old.x[cols[0]], old.x[cols[-1]]), (old.y[rows[0]], old.y[rows[-1]])
+        corners = np.array([[x, y] for x in xs for y in ys])
         c, s = math.cos(angle), math.sin(angle)
         q = corners @ np.array([[c, s], [-s, c]])
         i0, i1 = (math.floor(q[:, 0].min() / spacing) - 1, math.ceil(q[:, 0].max() / spacing) + 1)

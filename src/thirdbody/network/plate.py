@@ -56,7 +56,7 @@ from ..particle.interface import Window, remap
 from .body import Body
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, _solve_normal
 from .narrow import _smoothing
-from .window import Lattice
+from .window import Lattice, occupied
 
 __all__ = ["PlateContact", "PlateLattice", "solve_plate"]
 
@@ -341,7 +341,10 @@ def solve_plate(body: Body, side: str, *, plate: float = 0.0, mu: float, spacing
         return None
     history = None
     if previous is not None and previous.tangential_solution is not None:
-        history = previous.window
+        # the cells its traction occupies (a sliding plate moves the contact a little each
+        # step; the whole last window would grow the next by its margin every step)
+        history = occupied(previous.window, previous.tangential_solution.traction,
+                           previous.pressure)
     initial = None if warm is None or warm.grid.dx != spacing else (warm.window, warm.pressure)
     bound = 1.05 * delta + 1e-12 * spacing
     normal = _solve_normal(lattice, ElasticPair.rigid_plate(body.material), None, delta, bound,

@@ -9,6 +9,14 @@ result becomes the step's :class:`~thirdbody.records.LayerRecord`: the plates' t
 particle's variables (pose, turn, plate forces and contacts, state) and a row of the ``contact``
 table per contact (:mod:`thirdbody.schema`, kind "contact").
 
+**Sliding plates** (design notes §3d, :class:`~thirdbody.loading.Slide`): a step whose
+:attr:`~thirdbody.loading.LoadStep.shift` is not zero moves the upper plate horizontally by it
+(``plate_shift`` of :func:`solve_cluster`); the state carries the plate's position, its path
+length and the gap at the end of the compression, and the step records them with the effective
+friction (``mu_eff``, ``mu_eff_sliding``) and the dilatancy. Every step also records its energy
+balance: the upper plate's work on the particles, the contacts' stored elastic energy and their
+frictional dissipation, and the residual (:meth:`NetworkEngine._energy`).
+
 Conventions as in :mod:`~thirdbody.network.cluster`: SI units, the lower plate at z = 0 and the
 upper one at z = h. Horizontal positions in the records are the layer's (``x0``, ``y0`` as
 placed, ``position`` the centroid's displacement since, not wrapped into a periodic box);
@@ -28,6 +36,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,12 +67,67 @@ class NetworkState:
         The plate gap at the end of the last step, m (None before the first step).
     displacement : (n, 3) array
         Each centroid's displacement since the start of the run, m (not wrapped).
+    plate_shift : (2,) tuple
+        The upper plate's horizontal displacement since the start of the run, m.
+    sliding_distance : float
+        The path length it has slid, m.
+    slide_gap : float or None
+        The plate gap at the end of the compression (the last step before the plate first
+        slid), m; None until it slides.
+    slide_direction : (2,) tuple or None
+        Unit vector of the last sliding increment; None until the plate slides.
     """
 
     bodies: list
     histories: dict = field(default_factory=dict)
     gap: float | None = None
     displacement: np.ndarray | None = None
+    # the sliding plate (defaults: a checkpoint written before sliding plates reads as a run
+    # whose plate never slid)
+    plate_shift: tuple = (0.0, 0.0)
+    sliding_distance: float = 0.0
+    slide_gap: float | None = None
+    slide_direction: tuple | None = None
+
+
+class _Sliding(NamedTuple):
+    """The sliding plate at the end of a step (the :class:`NetworkState` fields of that name)."""
+
+    plate_shift: tuple
+    distance: float
+    slide_gap: float | None
+    direction: tuple | None
+
+    @classmethod
+    def after(cls, state: NetworkState, step: LoadStep) -> _Sliding:
+        """The plate after ``step`` from ``state`` (before the step)."""
+        dx, dy = (float(v) for v in step.shift)
+        shift = (state.plate_shift[0] + dx, state.plate_shift[1] + dy)
+        length = math.hypot(dx, dy)
+        if length == 0:
+            return cls(shift, state.sliding_distance, state.slide_gap, state.slide_direction)
+        gap = state.slide_gap
+        if gap is None:
+            if state.gap is None:
+                raise ValueError("the upper plate slides in the first load step: compress "
+                                 "the layer first (Slide does)")
+            gap = state.gap
+        return cls(shift, state.sliding_distance + length, gap, (dx / length, dy / length))
+
+    def along(self, result: ClusterResult) -> float:
+        """μ_eff along the sliding, positive when the layer resists it: the upper plate's
+        force on the particles along the last increment's direction, over F_N (NaN before
+        the plate slides)."""
+        if self.direction is None or not result.normal_force > 0:
+            return math.nan
+        e = self.direction
+        driving = math.fsum([float(result.plate_force[0]) * e[0],
+                             float(result.plate_force[1]) * e[1]])
+        return driving / result.normal_force + 0.0
+
+    def dilatancy(self, gap: float) -> float:
+        """h − h_c, m: the gap's change since the end of the compression (NaN before)."""
+        return math.nan if self.slide_gap is None else gap - self.slide_gap
 
 
 class NetworkEngine:
@@ -142,23 +206,53 @@ class NetworkEngine:
             load = {"force": step.value, "gap_start": state.gap}
         else:
             load = {"gap": self.d0 * (1.0 - step.value)}
+        sliding = _Sliding.after(state, step)           # refuses a slide before any load
         result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
                                mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
-                               numerics=self.numerics, **load)
+                               plate_shift=step.shift, numerics=self.numerics, **load)
         starts = [b.rotation for b in state.bodies]
         bodies, histories = list(result.bodies), dict(result.histories)
         if self.box is not None:
             bodies, histories = wrap(bodies, histories, self.box)
         displacement = state.displacement + result.translation
-        record = self._record(k, step, result, starts, displacement,
+        energy = self._energy(step, state, result)
+        record = self._record(k, step, result, starts, displacement, sliding, energy,
                               time.perf_counter() - t0)
         state.bodies, state.histories, state.gap = bodies, histories, result.gap
         state.displacement = displacement
+        (state.plate_shift, state.sliding_distance, state.slide_gap,
+         state.slide_direction) = sliding
         return record
+
+    # --- the step's energy --------------------------------------------------------------------
+    def _energy(self, step: LoadStep, state: NetworkState, result: ClusterResult) -> dict:
+        """The step's energy balance (design notes §3d): the upper plate's work on the
+        particles W = F̄ · Δu (trapezoid: F̄ the mean of its force on them at the start and the
+        end of the step, Δu = (Δs_x, Δs_y, Δh); so W = F_T·Δs − F_N·Δh with F_T the plate's
+        tangential force on them), the stored elastic energy E of every contact at the end,
+        their frictional dissipation D in the step, and the residual (W − ΔE − D) over
+        F_N (|Δs| + |Δh|) (:func:`_contact_energy`). The step's start is the state's histories
+        (the first step: no contact, the gap d₀)."""
+        start = [h.solved for h in state.histories.values()]
+        upper = [c.force for c in start if getattr(c, "side", None) == "upper"]
+        force0 = np.array([math.fsum(f[d] for f in upper) for d in range(3)])
+        gap0 = self.d0 if state.gap is None else state.gap
+        move = np.array([*step.shift, result.gap - gap0], dtype=float)
+        mean = 0.5 * (force0 + np.asarray(result.plate_force, dtype=float))
+        work = math.fsum(mean * move)
+        stored0 = math.fsum(_contact_energy(c)[0] for c in start)
+        ends = [_contact_energy(h.solved) for h in result.histories.values()]
+        stored = math.fsum(e[0] for e in ends)
+        dissipated = math.fsum(e[1] for e in ends)
+        scale = result.normal_force * (math.hypot(*step.shift) + abs(move[2]))
+        residual = ((work - (stored - stored0) - dissipated) / scale if scale > 0
+                    else math.nan)
+        return dict(plate_work=work, elastic_energy=stored, dissipation=dissipated,
+                    energy_residual=residual)
 
     # --- the step's records ------------------------------------------------------------------
     def _record(self, k: int, step: LoadStep, result: ClusterResult, starts, displacement,
-                seconds: float) -> LayerRecord:
+                sliding: _Sliding, energy: dict, seconds: float) -> LayerRecord:
         n = len(result.bodies)
         plate = {i: {} for i in range(n)}
         touching = [[] for _ in range(n)]          # each particle's loaded contacts
@@ -199,6 +293,9 @@ class NetworkEngine:
             plate_force=(float(-result.plate_force[0]) + 0.0,
                          float(-result.plate_force[1]) + 0.0),
             plate_moment=schema.VARIABLES["plate_moment"].blank(),
+            plate_shift=sliding.plate_shift, sliding_distance=sliding.distance,
+            mu_eff_sliding=sliding.along(result), dilatancy=sliding.dilatancy(result.gap),
+            **energy,
             network_residual=result.residual, network_iterations=result.iterations,
             share_error=0.0, time_total=seconds)
         for var in schema.by_kind("step"):
@@ -208,7 +305,7 @@ class NetworkEngine:
             if var.derive is not None:
                 for r in records:
                     r.values[var.name] = var.derive(r.values)
-        rows = [self._row(k, c) for c in result.contacts]
+        rows = [self._row(k, c, result.histories[c.key].solved) for c in result.contacts]
         return LayerRecord(k, step.kind, records, values, contacts=rows)
 
     def _particle(self, k: int, step: LoadStep, i: int, body: Body, result: ClusterResult,
@@ -269,8 +366,9 @@ class NetworkEngine:
             turn_evaluations=result.iterations)
         return StepRecord(k, step.kind, values, gap=result.gap)
 
-    def _row(self, k: int, c) -> dict:
+    def _row(self, k: int, c, solved) -> dict:
         image = (0, 0) if isinstance(c.j, str) else tuple(int(v) for v in c.key[2])
+        stored, dissipated = _contact_energy(solved)
         return {
             "contact_step": k, "contact_i": int(c.i),
             "contact_j": PLATE_INDEX[c.j] if isinstance(c.j, str) else int(c.j),
@@ -286,4 +384,21 @@ class NetworkEngine:
             "contact_state": c.state,
             "contact_half_space_ratio": float(c.half_space_ratio),
             "contact_mu": float(c.mu),
+            "contact_elastic_energy": stored, "contact_dissipation": dissipated,
         }
+
+
+def _contact_energy(solved) -> tuple[float, float]:
+    """A solved contact's stored elastic energy ½ Σ (p u_n + τ·u_t) ΔA and the frictional
+    dissipation of its last step Σ τ·w ΔA, J (p, τ its pressure and traction, u_n, u_t the
+    elastic displacements they cause, w the cells' slip increment in the step; τ and w are
+    what the plate, or body b, exerts on the particle, or body a, and its slip over it, so
+    that τ·w >= 0 cell by cell). Both are sums over the contact's window, in its own frame."""
+    normal, tangential = solved.normal_solution, solved.tangential_solution
+    area = normal.grid.cell_area
+    stored = math.fsum((normal.pressure * normal.displacement).ravel())
+    dissipated = 0.0
+    if tangential is not None:
+        stored += math.fsum((tangential.traction * tangential.displacement).ravel())
+        dissipated = math.fsum((tangential.traction * tangential.slip_increment).ravel())
+    return 0.5 * stored * area, dissipated * area

@@ -180,6 +180,22 @@ def ring(corner: tuple[int, int], mask: np.ndarray,
     return (corner[0] - width, corner[1] - width), grown & ~padded
 
 
+def occupied(window: Window, *fields: np.ndarray) -> Window | None:
+    """The smallest window holding the cells of ``window`` where some field (each
+    (..., ny, nx) on it) is non-zero; None if all are zero. A contact's history window: the
+    cells its traction and pressure occupy, not the solved window with its free margin (which
+    held as the next window, margin and all, would grow by a margin every step)."""
+    live = np.zeros((window.ny, window.nx), dtype=bool)
+    for f in fields:
+        f = np.asarray(f)
+        live |= (f != 0).reshape(-1, window.ny, window.nx).any(axis=0)
+    if not live.any():
+        return None
+    rows, cols = np.flatnonzero(live.any(axis=1)), np.flatnonzero(live.any(axis=0))
+    return Window(window.i0 + int(cols[0]), window.j0 + int(rows[0]),
+                  int(cols[-1] - cols[0]) + 1, int(rows[-1] - rows[0]) + 1)
+
+
 def window_around(cells: np.ndarray, corner: tuple[int, int],
                   extra: Window | None = None) -> Window:
     """The bounding box of ``cells`` (a mask with cell (i, j) at [j − j0, i − i0]) with two free

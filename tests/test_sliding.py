@@ -1,0 +1,482 @@
+"""Sliding plates (design notes §3d, issue 26): the :class:`thirdbody.Slide` program, its
+configuration, the variables a sliding run writes, and single particles sheared between the
+plates, against references computed here from the geometry, never by the code under test:
+
+* a sphere between sliding plates rolls without slip on both: its centre moves Δs/2 and it
+  turns by Δs/h about the axis perpendicular to the sliding, h = 2(R − δ) with δ Hertz's
+  approach; the plates need no tangential force (μ_eff → 0) and the gap does not change;
+  sliding back to the start retraces the way out, every contact sticking;
+* a flat ellipsoid (its smallest axis vertical) cannot roll on: it tilts until the rigid
+  couple ratio ξ(θ) of its own ellipse reaches the smaller μ (a few µm of sliding), then
+  slides on the plate with the smaller μ and moves with the other: μ_eff = μ_min, the
+  dilatancy the rigid gap change 2(√(A² sin²θ + C² cos²θ) − C) at that tilt;
+* the gap held instead of the force.
+
+Resolutions are coarse (20 cells per particle size) and the runs few steps, so that the whole
+file takes a few seconds; each tolerance is the measured error with headroom, stated next to it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+import warnings
+
+import numpy as np
+import pytest
+
+import thirdbody as tb
+from thirdbody.io import ConfigError, parse_config
+from thirdbody.network.cluster import HalfSpaceWarning
+from thirdbody.shapes import Ellipsoid, Sphere
+
+R = 1e-3                            # sphere radius, m
+MAT = tb.Material(1e9, 0.3)
+E_STAR = 1e9 / (1 - 0.3**2)         # a particle on a rigid plate
+F = 1.0                             # N
+STEP = 10e-6                        # sphere: sliding increment, m (1 % of R)
+A, B, C = 1e-3, 0.8e-3, 0.2e-3      # the flat ellipsoid's semi-axes, m
+FLAT_STEP = 5e-6                    # its sliding increment, m
+MU_UP, MU_LOW = 0.6, 0.3            # the flat ellipsoid's plates
+
+
+def run(particle, plates, load, resolution=20.0):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        sim = tb.Simulation(particle, plates, load, mu_pp=0.3, resolution=resolution,
+                            network_tol=1e-5, maps_every=0)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    return ds
+
+
+def sliding(ds, name):
+    """A per-step variable of one particle (the particle dimension dropped)."""
+    return ds[name].squeeze("particle", drop=True) if "particle" in ds[name].dims else ds[name]
+
+
+# --- a: the program ----------------------------------------------------------------------------
+def test_slide_compresses_then_moves_the_plate_through_its_points():
+    load = tb.Slide(force=2.0, points=[(30e-6, 0.0), (30e-6, 20e-6), (0.0, 0.0)], steps=3,
+                    compress_steps=2)
+    schedule = load.schedule()
+    assert len(schedule) == 2 + 3 * 3 == len(load)
+    assert [(s.kind, s.value) for s in schedule[:2]] == [("force", 1.0), ("force", 2.0)]
+    assert not any(s.slides for s in schedule[:2])
+    assert all(s.kind == "force" and s.value == 2.0 and s.slides for s in schedule[2:])
+    shifts = np.array([s.shift for s in schedule[2:]])
+    ends = np.cumsum(shifts, axis=0)[2::3]            # the plate after each segment
+    assert ends == pytest.approx(np.array(load.path), abs=1e-20)
+    assert shifts[:3] == pytest.approx(np.array([(10e-6, 0.0)] * 3))
+    assert shifts[3:6] == pytest.approx(np.array([(0.0, 20e-6 / 3)] * 3))
+    assert load.slides and not tb.LinearRamp(stop=1.0).slides
+    assert load.max_force == 2.0
+
+
+def test_slide_by_a_distance_in_a_direction_under_gap_control():
+    load = tb.Slide(compression=0.01, distance=40e-6, direction_deg=90.0, steps=4,
+                    compress_steps=1)
+    schedule = load.schedule()
+    assert [(s.kind, s.value) for s in schedule] == [("compression", 0.01)] * 5
+    assert np.sum([s.shift for s in schedule], axis=0) == pytest.approx([0.0, 40e-6],
+                                                                         abs=1e-20)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"distance": 1e-5}, r"exactly one of load\.force .* load\.compression"),
+    ({"force": 1.0, "compression": 0.1, "distance": 1e-5}, r"exactly one of load\.force"),
+    ({"force": -1.0, "distance": 1e-5}, r"load\.force .* \(0, inf\)"),
+    ({"compression": 0.6, "distance": 1e-5}, r"load\.compression .* \(0, 0\.5\]"),
+    ({"force": 1.0}, r"exactly one of load\.distance .* load\.points"),
+    ({"force": 1.0, "distance": 0.0}, r"load\.distance .* \(0, inf\)"),
+    ({"force": 1.0, "points": []}, r"load\.points must list at least one"),
+    ({"force": 1.0, "points": [(1e-5, 0.0), (1e-5, 0.0)]}, r"load\.points\[1\] .* again"),
+    ({"force": 1.0, "points": [(1e-5, math.nan)]}, r"load\.points\[0\] must be two finite"),
+    ({"force": 1.0, "distance": 1e-5, "steps": 0}, r"load\.steps must be an integer >= 1"),
+    ({"force": 1.0, "distance": 1e-5, "compress_steps": 2.5}, r"load\.compress_steps"),
+])
+def test_a_bad_slide_names_the_argument_and_its_range(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        tb.Slide(**kwargs)
+
+
+def test_the_particle_model_refuses_to_slide_and_says_why():
+    with pytest.raises(ValueError, match=r"slides the upper plate sideways, which only the "
+                                         r"network engine can do: give mu_pp"):
+        tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5),
+                      tb.Slide(force=F, distance=1e-5))
+
+
+def test_a_program_that_slides_before_pressing_stops_the_run_and_says_why():
+    @dataclasses.dataclass(frozen=True)
+    class SlideFirst(tb.loading.LoadProgram):
+        def schedule(self):
+            return [tb.loading.LoadStep("force", F, (STEP, 0.0))]
+
+    sim = tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), SlideFirst(), mu_pp=0.3,
+                        resolution=20)
+    with pytest.warns(tb.SimulationStoppedWarning):
+        sim.run()
+    assert "slides in the first load step: compress the layer first" in sim.status
+
+
+# --- b: the configuration ----------------------------------------------------------------------
+_CONFIG = {"particle": {"shape": "sphere", "radius": R, "E": 1e9, "nu": 0.3},
+           "plates": {"mu_up": 0.5}, "network": {"mu_pp": 0.3},
+           "load": {"program": "slide", "force": F, "points": [[20e-6, 0.0], [0.0, 0.0]],
+                    "steps": 2, "compress_steps": 1},
+           "numerics": {"resolution": 20.0}}
+
+
+def test_a_slide_table_builds_the_program_and_writes_back_the_same():
+    cfg = parse_config(_CONFIG)
+    _, _, load, numerics = cfg.build()
+    assert load == tb.Slide(force=F, points=[(20e-6, 0.0), (0.0, 0.0)], steps=2,
+                            compress_steps=1)
+    assert numerics["mu_pp"] == 0.3
+    again = parse_config(tomllib.loads(cfg.to_toml()))
+    assert again.build()[2] == load
+
+
+@pytest.mark.parametrize("load, match", [
+    ({"force": F, "compression": 0.01, "points": [[1e-5, 0.0]]}, r"load: give exactly one of "
+                                                                  r"force"),
+    ({"force": F}, r"load: give exactly one of distance"),
+    ({"force": 0.0, "distance": 1e-5}, r"load\.force = 0\.0: must be > 0"),
+    ({"compression": 0.7, "distance": 1e-5}, r"load\.compression = 0\.7: must be <= 0\.5"),
+    ({"force": F, "points": [[1e-5, 0.0, 0.0]]}, r"load\.points\[0\]: give at most 2"),
+    ({"force": F, "points": [[0.0, 0.0]]}, r"load\.points\[0\] = \[0\.0, 0\.0\] is the start"),
+    ({"force": F, "distance": 1e-5, "steps": 0}, r"load\.steps = 0: must be >= 1"),
+    ({"force": F, "distance": 1e-5, "spam": 1}, r"load\.spam: unknown key"),
+])
+def test_a_bad_slide_table_names_the_key(load, match):
+    with pytest.raises(ConfigError, match=match):
+        parse_config({**_CONFIG, "load": {"program": "slide", **load}})
+
+
+def test_a_slide_table_without_a_network_table_is_refused():
+    data = {k: v for k, v in _CONFIG.items() if k != "network"}
+    with pytest.raises(ConfigError, match=r'load\.program = "slide" .* needs a network run: '
+                                          r"add a \[network\] table with mu_pp"):
+        parse_config(data)
+
+
+# --- c: a sliding run --------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def sphere_run():
+    """A sphere pressed by 1 N in one step, slid 3 x 10 µm along +x and back to the start."""
+    load = tb.Slide(force=F, points=[(3 * STEP, 0.0), (0.0, 0.0)], steps=3, compress_steps=1)
+    return run(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), load)
+
+
+def test_the_network_engine_moves_the_upper_plate_by_each_step_s_shift(sphere_run):
+    """The sphere's centre follows the plate at half its pace: Δs/2 per step, out and back."""
+    x = sliding(sphere_run, "position").sel(component="x").values
+    plate = np.concatenate([[0.0], np.cumsum([STEP] * 3 + [-STEP] * 3)])
+    assert x == pytest.approx(plate / 2, abs=1e-6 * STEP)
+
+
+# --- d: what a sliding run writes --------------------------------------------------------------
+SLIDING = ("plate_shift", "sliding_distance", "mu_eff", "mu_eff_magnitude", "mu_eff_sliding",
+           "dilatancy")
+ENERGY = ("plate_work", "elastic_energy", "dissipation", "energy_residual",
+          "contact_elastic_energy", "contact_dissipation")
+
+
+def test_a_sliding_run_writes_the_plate_s_path_mu_eff_and_the_dilatancy(sphere_run):
+    ds = sphere_run
+    for name in SLIDING:
+        var = tb.schema.VARIABLES[name]
+        assert ds[name].attrs["units"] == var.units and ds[name].attrs["long_name"], name
+    steps = [0.0] + [STEP] * 3 + [-STEP] * 3
+    s_x = np.cumsum(steps)
+    assert ds.plate_shift.sel(component="x").values == pytest.approx(s_x, abs=1e-20)
+    assert (ds.plate_shift.sel(component="y").values == 0).all()
+    assert ds.sliding_distance.values == pytest.approx(np.cumsum(np.abs(steps)), abs=1e-20)
+    # μ_eff is F_T / F_N, F_T the particles' force on the upper plate (plate_force)
+    F_T = ds.plate_force.transpose("step", "component").values
+    F_N = ds.total_force.values
+    assert ds.mu_eff.transpose("step", "component").values == pytest.approx(
+        F_T / F_N[:, None], rel=1e-12)
+    assert ds.mu_eff_magnitude.values == pytest.approx(np.hypot(*F_T.T) / F_N, rel=1e-12)
+    # along the sliding, positive when resisting: −F_T·e/F_N with e = ±x
+    e = np.sign(steps)
+    assert np.isnan(ds.mu_eff_sliding.values[0]) and np.isnan(ds.dilatancy.values[0])
+    assert ds.mu_eff_sliding.values[1:] == pytest.approx(-F_T[1:, 0] * e[1:] / F_N[1:],
+                                                         rel=1e-12)
+    h = ds.plate_gap.values
+    assert ds.dilatancy.values[1:] == pytest.approx(h[1:] - h[0], abs=1e-20)
+
+
+def test_a_run_whose_plates_do_not_slide_says_so():
+    """The particle model (and any program without sliding): plate_shift and sliding_distance
+    0, μ_eff along the sliding and the dilatancy undefined, μ_eff still F_T / F_N."""
+    ds = tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), tb.LinearRamp(stop=F, steps=1),
+                       resolution=20, maps_every=0).run()
+    assert (ds.plate_shift.values == 0).all() and (ds.sliding_distance.values == 0).all()
+    assert np.isnan(ds.mu_eff_sliding.values).all() and np.isnan(ds.dilatancy.values).all()
+    assert ds.mu_eff.sel(component="x").values == pytest.approx(
+        ds.plate_force.sel(component="x").values / ds.total_force.values)
+
+
+def test_a_file_written_before_sliding_plates_reads_with_their_variables(sphere_run):
+    """A results dataset without the sliding and energy variables (as the files written before
+    them), as
+    :func:`~thirdbody.io.open_results` converts it after reading (in memory here: the file
+    round trip is tested with the network's variables): the plate never slid (shift and
+    distance 0, μ_eff along the sliding and the dilatancy NaN), its energies are unknown (NaN)
+    and μ_eff is its plate_force over its total_force; a dataset with them keeps them."""
+    from thirdbody.io.results import upgrade
+
+    ds = sphere_run
+    new = upgrade(ds)
+    for name in SLIDING:
+        assert np.array_equal(new[name].values, ds[name].values, equal_nan=True), name
+    old = upgrade(ds.drop_vars([*SLIDING, *ENERGY]))
+    for name in ENERGY:
+        assert old[name].dims == ds[name].dims and np.isnan(old[name].values).all(), name
+    assert (old.plate_shift.values == 0).all() and (old.sliding_distance.values == 0).all()
+    assert np.isnan(old.mu_eff_sliding.values).all() and np.isnan(old.dilatancy.values).all()
+    for name in ("mu_eff", "mu_eff_magnitude"):
+        assert np.array_equal(old[name].values, ds[name].values), name
+        assert old[name].attrs["units"] == "1"
+    assert old.plate_shift.dims == ("step", "component")
+
+
+def test_a_sliding_run_resumed_mid_slide_ends_as_the_uninterrupted_one(sphere_run):
+    """The plate's position, path length and the gap at the end of the compression live in the
+    run's state, so a run resumed after its second sliding step ends bit for bit as one that
+    was not interrupted."""
+    load = tb.Slide(force=F, points=[(3 * STEP, 0.0), (0.0, 0.0)], steps=3, compress_steps=1)
+    make = lambda: tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), load,  # noqa: E731
+                                 mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0)
+    first = make()
+    blob = None
+    for record, _, current in first.steps():
+        first.records.append(record)
+        if record.step == 2:
+            blob = first.snapshot(current)
+            break
+    again = make().run(resume_from=blob)
+    for name in (*SLIDING, *ENERGY, "plate_gap", "position", "quaternion"):
+        assert np.array_equal(again[name].values, sphere_run[name].values, equal_nan=True), name
+
+
+# --- e: validation: a sphere rolls -------------------------------------------------------------
+def hertz_gap(force: float) -> float:
+    """A sphere R pressed by ``force`` between two rigid plates: h = 2(R − δ), Hertz's approach
+    δ = a²/R with a³ = 3 F R / (4 E*) at each plate."""
+    a = (3 * force * R / (4 * E_STAR)) ** (1 / 3)
+    return 2 * (R - a * a / R)
+
+
+def test_a_sphere_between_sliding_plates_rolls_without_resistance(sphere_run):
+    """Rolling without slip on both plates: per step the centre moves Δs/2 and the sphere turns
+    by Δs/h about +y (the axis perpendicular to the sliding, by the right-hand rule: the top
+    goes with the plate), h = 2(R − δ) from Hertz; so turn·2R/Δs = 2R/h (1.0078). The plate
+    needs no tangential force: measured |μ_eff| 2.4e-7 (tolerance 1e-5); the gap does not
+    change (no dilatancy) and every contact sticks."""
+    ds = sphere_run
+    out = slice(1, 4)                               # the three steps along +x
+    h = hertz_gap(F)
+    turn = np.radians(sliding(ds, "rotation").values[out])      # (step, component), rad
+    assert turn[:, 1] == pytest.approx(STEP / h, rel=1e-3)     # measured 2e-5
+    assert turn[:, 1] * 2 * R / STEP == pytest.approx(1.0, rel=0.01)
+    assert np.abs(turn[:, 0]).max() < 1e-6 * STEP / h
+    move = sliding(ds, "translation").values[out]
+    assert move[:, 0] == pytest.approx(STEP / 2, rel=1e-6)
+    assert np.abs(move[:, 1:]).max() < 1e-6 * STEP
+    assert np.abs(ds.mu_eff_magnitude.values).max() < 1e-5
+    assert np.abs(ds.dilatancy.values[1:]).max() < 1e-9 * h
+    assert (sliding(ds, "state").values == tb.schema.STATES.index("stick")).all()
+    assert (ds.contact_state.values == tb.schema.CONTACT_STATES.index("stick")).all()
+
+
+def test_a_sphere_slid_back_retraces_its_way_out(sphere_run):
+    """Out by 3 Δs and back, every contact sticking: each step back undoes one step out (the
+    centre moves −Δs/2, the turn is reversed), and the sphere ends where it started: position
+    and orientation as after the compression (measured 2e-21 m and 3e-12°)."""
+    ds = sphere_run
+    x = sliding(ds, "position").sel(component="x").values
+    turn = sliding(ds, "rotation").sel(component="y").values
+    assert x[4:] == pytest.approx(x[2::-1], abs=1e-6 * STEP)
+    assert turn[4:] == pytest.approx(-turn[1:4][::-1], rel=1e-6)
+    assert abs(x[-1] - x[0]) < 1e-6 * STEP
+    tilt = sliding(ds, "orientation").values
+    assert np.abs(tilt[-1] - tilt[0]).max() < 1e-6 * math.degrees(STEP / R)
+    assert ds.plate_gap.values[-1] == pytest.approx(ds.plate_gap.values[0], rel=1e-12)
+    assert (ds.contact_state.values == tb.schema.CONTACT_STATES.index("stick")).all()
+
+
+def test_a_sphere_under_a_held_gap_rolls_and_the_gap_stays():
+    """Gap control: the plates hold the gap of the compression, the sphere rolls as under force
+    control (centre Δs/2 per step) and its normal force stays (rel 1e-6)."""
+    load = tb.Slide(compression=0.008, distance=2 * STEP, steps=2, compress_steps=1)
+    ds = run(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), load)
+    h = ds.plate_gap.values
+    assert (h == h[0]).all() and (ds.dilatancy.values[1:] == 0).all()
+    assert ds.total_force.values == pytest.approx(ds.total_force.values[0], rel=1e-6)
+    x = sliding(ds, "position").sel(component="x").values
+    assert x == pytest.approx([0.0, STEP / 2, STEP], abs=1e-6 * STEP)
+
+
+# --- f: validation: a particle that cannot roll slides at the smaller μ ------------------------
+def rigid_ratio(theta: float) -> float:
+    """ξ(θ) of the rigid ellipse of semi-axes A (x) and C (z) tilted by θ about y: the offset of
+    its contact points over the gap, the tangential force over the normal one it needs to stay
+    put (design notes §3, eq 3)."""
+    s, c = math.sin(theta), math.cos(theta)
+    return (A**2 - C**2) * s * c / (A**2 * s * s + C**2 * c * c)
+
+
+def rigid_gap(theta: float) -> float:
+    """The height of that rigid ellipse, m."""
+    return 2 * math.sqrt(A**2 * math.sin(theta) ** 2 + C**2 * math.cos(theta) ** 2)
+
+
+@pytest.fixture(scope="module")
+def flat_run():
+    """An ellipsoid lying flat (semi-axes 1 x 0.8 x 0.2 mm, the smallest vertical), μ_up 0.6,
+    μ_low 0.3, pressed by 1 N, slid 4 x 5 µm along +x."""
+    load = tb.Slide(force=F, distance=4 * FLAT_STEP, steps=4, compress_steps=1)
+    return run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_UP, MU_LOW), load)
+
+
+def test_a_flat_ellipsoid_cannot_roll_and_slides_on_the_plate_with_the_smaller_mu(flat_run):
+    """Rolling would tilt it, and a tilt θ needs the tangential force ξ(θ) F_N, which grows
+    from 0 as 24 θ (ξ'(0) = (A² − C²)/C²): once ξ reaches μ_low = 0.3 (θ* = 0.70°, some 5 µm
+    of rolling, θ* h) it cannot roll on and slides on the lower plate, stuck to the upper one.
+    From then on (the last two steps): μ_eff = μ_min (measured 0.300003; it resists: F_T, the
+    particles' force on the upper plate, points along −x), the lower contact slides and the
+    upper sticks, the particle moves with the upper plate (Δs per step) without turning, its
+    tilt is where the rigid ellipse's ξ is μ_min (measured 0.2916: 3 %, the deformable
+    contacts) and the dilatancy is the rigid ellipse's gap change at that tilt (measured 2.4 %
+    more)."""
+    ds = flat_run
+    settled = slice(3, 5)
+    assert ds.mu_eff_sliding.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
+    assert ds.mu_eff.sel(component="x").values[settled] == pytest.approx(-MU_LOW, rel=1e-4)
+    assert ds.mu_eff_magnitude.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
+    steps = ds.contact_step.values
+    for k in (3, 4):
+        state = dict(zip(ds.contact_j.values[steps == k], ds.contact_state.values[steps == k],
+                         strict=True))
+        assert state == {-1: tb.schema.CONTACT_STATES.index("slide"),
+                         -2: tb.schema.CONTACT_STATES.index("stick")}
+    move = sliding(ds, "translation").values[settled]
+    assert move[:, 0] == pytest.approx(FLAT_STEP, rel=1e-3)
+    h = ds.plate_gap.values[-1]
+    turn = np.radians(sliding(ds, "rotation").values[settled])
+    assert np.abs(turn).max() < 1e-3 * FLAT_STEP / h
+    theta = math.radians(float(sliding(ds, "orientation").sel(component="y").values[-1]))
+    assert rigid_ratio(theta) == pytest.approx(MU_LOW, rel=0.05)
+    # it can roll no further: the rigid rolling that reaches μ_min is a fraction of the slide
+    assert theta * h < 0.5 * 4 * FLAT_STEP
+    assert ds.dilatancy.values[-1] == pytest.approx(rigid_gap(theta) - rigid_gap(0.0), rel=0.05)
+    # steady sliding: no more dilatancy (measured 4e-14 m, 5e-8 of it)
+    assert ds.dilatancy.values[-1] == pytest.approx(ds.dilatancy.values[-2], rel=1e-5)
+
+
+def test_a_flat_ellipsoid_slides_on_the_upper_plate_when_its_mu_is_the_smaller():
+    """The plates' μ swapped (μ_up 0.3 < μ_low 0.6): once sliding, μ_eff = μ_up and the
+    particle stays on the lower plate (it moves by less than 1 % of Δs per step)."""
+    load = tb.Slide(force=F, distance=4 * FLAT_STEP, steps=4, compress_steps=1)
+    ds = run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_LOW, MU_UP), load)
+    settled = slice(3, 5)
+    assert ds.mu_eff_sliding.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
+    move = sliding(ds, "translation").values[settled]
+    assert np.abs(move[:, 0]).max() < 0.01 * FLAT_STEP
+
+
+# --- g: the figure -----------------------------------------------------------------------------
+def test_the_shear_figure_draws_mu_eff_and_the_dilatancy_against_the_sliding_distance(
+        sphere_run, flat_run):
+    """From the end of the compression (s = 0, dilatancy 0): μ_eff along the sliding (there,
+    the particles' resistance to the first increment's direction) and the dilatancy in µm,
+    against the plate's path length in µm; the reversal of the sphere's run marked at 30 µm."""
+    pytest.importorskip("matplotlib")
+    from thirdbody import plot
+
+    ds = flat_run
+    fig = plot.shear_curve(ds)
+    top, bottom = fig.axes[:2]
+    s, mu = next(ln for ln in top.get_lines() if "along" in ln.get_label()).get_data()
+    assert s == pytest.approx(1e6 * FLAT_STEP * np.arange(5))
+    F_T = ds.plate_force.sel(component="x").values
+    assert mu[0] == pytest.approx(-F_T[0] / F, abs=1e-12)
+    assert mu[1:] == pytest.approx(ds.mu_eff_sliding.values[1:])
+    assert mu[-1] == pytest.approx(MU_LOW, rel=1e-4)
+    s, dilatancy = next(ln for ln in bottom.get_lines() if len(ln.get_xdata()) > 2).get_data()
+    assert dilatancy == pytest.approx(np.concatenate([[0.0], 1e6 * ds.dilatancy.values[1:]]))
+    assert not [ln for ln in top.get_lines() if ln.get_gid() == "reversal"]
+    fig = plot.shear_curve(sphere_run)
+    marks = [ln.get_xdata()[0] for ax in fig.axes[:2] for ln in ax.get_lines()
+             if ln.get_gid() == "reversal"]
+    assert marks == pytest.approx([1e6 * 3 * STEP] * 2)
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
+
+
+def test_save_all_adds_the_shear_figure_to_a_sliding_run(sphere_run, tmp_path):
+    from thirdbody import plot
+
+    written = plot.save_all(sphere_run, tmp_path, formats=("png",))
+    assert sorted(p.name for p in written) == ["orientation.png", "shear.png", "state.png"]
+
+
+# --- h: the energy balance ---------------------------------------------------------------------
+def test_a_rolling_sphere_stores_hertz_s_energy_and_dissipates_nothing(sphere_run):
+    """Each plate contact stores Hertz's ∫F dδ = (2/5) F δ (measured 1.3 % more: the grid); the
+    compression, one step from touching, leaves the trapezoid's error: the plate's work counted
+    as ½ F Δh against (2/5) F Δh stored, a residual of 0.1 (measured 0.095). Rolling, nothing
+    slips and the plates do no work: the balance closes within 1e-5 of F_N Δs (measured 2e-7,
+    the size of μ_eff)."""
+    ds = sphere_run
+    a = (3 * F * R / (4 * E_STAR)) ** (1 / 3)
+    delta = a * a / R
+    assert ds.elastic_energy.values == pytest.approx(2 * 0.4 * F * delta, rel=0.03)
+    assert ds.energy_residual.values[0] == pytest.approx(0.1, abs=0.01)
+    rolling = slice(1, None)
+    assert np.abs(ds.energy_residual.values[rolling]).max() < 1e-5
+    assert np.abs(ds.dissipation.values).max() < 1e-12 * F * STEP
+    assert np.abs(ds.plate_work.values[rolling]).max() < 1e-5 * F * STEP
+
+
+def test_a_sliding_flat_ellipsoid_dissipates_mu_min_f_n_per_unit_slid(flat_run):
+    """Once it slides on the lower plate, that contact dissipates Coulomb's μ_low F_N Δs a step
+    (measured to 3e-6) and the upper one, stuck, nothing (2e-8 of it), the stored energy stays,
+    and the balance closes within 1e-4 of F_N Δs (measured 3e-6). The steps that move from
+    stick to sliding close less well (measured -0.4 % and -2.1 %): their work is counted with
+    the forces at the step's ends, their dissipation with its end's tractions, and between the
+    two the forces do not change linearly; halving the step brings the sum of those residuals
+    from -5.2 % to -0.3 % of the work (measured with solve_cluster, resolution 20)."""
+    ds = flat_run
+    settled = [3, 4]
+    steps, j = ds.contact_step.values, ds.contact_j.values
+    for k in settled:
+        lower = ds.contact_dissipation.values[(steps == k) & (j == -1)]
+        upper = ds.contact_dissipation.values[(steps == k) & (j == -2)]
+        assert lower == pytest.approx([MU_LOW * F * FLAT_STEP], rel=1e-4)
+        assert abs(upper[0]) < 1e-6 * lower[0]
+        assert ds.dissipation.values[k] == pytest.approx(lower[0] + upper[0], rel=1e-12)
+    assert np.abs(ds.energy_residual.values[settled]).max() < 1e-4
+    assert ds.elastic_energy.values[4] == pytest.approx(ds.elastic_energy.values[3], rel=1e-5)
+    # the first step tilts it, its contacts sticking but for 2 % of the work: the tangential
+    # energy stored then is 3 % of the step's work, so a balance within 1 % counts it
+    assert abs(ds.energy_residual.values[1]) < 0.01
+    assert abs(ds.energy_residual.values[2]) < 0.05
+    assert (ds.contact_dissipation.values >= -1e-20).all()
+
+
+def test_the_bundled_shear_example_is_a_slide_out_and_back():
+    from importlib import resources
+
+    from thirdbody.io import load_config
+
+    path = resources.files("thirdbody") / "examples" / "shear_ellipsoid.toml"
+    _, plates, load, numerics = load_config(path).build()
+    assert isinstance(load, tb.Slide) and load.force == 1.0
+    assert load.path == [(20e-6, 0.0), (0.0, 0.0), (-20e-6, 0.0), (0.0, 0.0)]
+    assert (plates.mu_up, plates.mu_low) == (0.6, 0.3) and numerics["mu_pp"] == 0.3
