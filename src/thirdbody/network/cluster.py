@@ -1221,11 +1221,12 @@ def _contact_keys(contacts, n: int) -> list[set]:
 
 
 def _learn(problem: _Problem, ev: _Evaluation, trial: _Evaluation, terms: list[_Term],
-           active: list[bool], laws: list, predicted: np.ndarray, step: np.ndarray,
-           rows: np.ndarray) -> bool:
+           active: list[bool], laws: list, R: np.ndarray, R_trial: np.ndarray,
+           predicted: np.ndarray, step: np.ndarray, rows: np.ndarray) -> bool:
     """Correct each particle's own block of the linear model by what a trial's BEM residuals
     showed (Broyden's good update of the 6 x 6 diagonal block, row by row as in Schubert's
-    sparse update, in scaled unknowns: a rotation as the arc at the particle's size).
+    sparse update, in scaled unknowns: a rotation as the arc at the particle's size). ``R``,
+    ``R_trial``: the (n, 6) residuals at the current poses and at the trial's.
 
     A contact's model is a few numbers from its last solve (Hertz's and Mindlin's stiffnesses of
     a circle, the curvatures at the first touch). Where the BEM contact is not that (a tilted
@@ -1255,9 +1256,8 @@ def _learn(problem: _Problem, ev: _Evaluation, trial: _Evaluation, terms: list[_
             ok[t.a] = False
             if t.b is not None:
                 ok[t.b] = False
-    R_trial = _residual_vector(problem, trial)[0]
     mismatch = R_trial - predicted
-    change = R_trial - _residual_vector(problem, ev)[0]
+    change = R_trial - R
     # ŝ = (du, L dφ): |ŝ|² = s · (weight s); residuals scaled as (F, M / L)
     weight = np.hstack([np.ones((n, 3)), np.repeat(problem.sizes[:, None] ** 2, 3, 1)])
     changed = False
@@ -1590,13 +1590,13 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
                     f"({exc}); residual {worst:.3e} > tol {numerics.tol:.1e}") from exc
             continue
         solves += trial.solves
+        phase_passes += translate
+        R_trial, plate_trial = _residual_vector(problem, trial)
         learnt = False
         if learn:
             Rs = _scaled(problem, R, plate, ev.scale or merit_scale)[0]
-            learnt = _learn(problem, ev, trial, terms, step_active, step_laws, out, step,
-                            np.abs(Rs).max(axis=1) > numerics.tol)
-        phase_passes += translate
-        R_trial, plate_trial = _residual_vector(problem, trial)
+            learnt = _learn(problem, ev, trial, terms, step_active, step_laws, R, R_trial, out,
+                            step, np.abs(Rs).max(axis=1) > numerics.tol)
         merit_trial = _merit(problem, R_trial, plate_trial, merit_scale, translate)
         done_trial, _ = _converged(problem, trial, numerics.tol)
         fall = merit - merit_trial
