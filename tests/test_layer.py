@@ -505,6 +505,7 @@ def five_tilted():
     return layer, ds
 
 
+@pytest.mark.slow
 def test_two_worker_processes_give_the_same_results_as_one(five_tilted):
     """The five tilted ellipsoids in two processes: the results are identical to the
     in-process run, bit for bit."""
@@ -515,6 +516,10 @@ def test_two_worker_processes_give_the_same_results_as_one(five_tilted):
             continue
         assert np.array_equal(var.values, two[name].values,
                               equal_nan=var.dtype.kind == "f"), name
+
+
+def test_workers_must_be_a_positive_integer():
+    layer = tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(1e-3), SOFT), (0.0, 0.0))])
     with pytest.raises(ValueError, match="workers must be an integer >= 1"):
         tb.Simulation(layer, tb.Plates(0.1), tb.LinearRamp(stop=1.0, steps=1), workers=0)
 
