@@ -159,6 +159,23 @@ def test_gap_control_reproduces_force_control_and_a_free_particle_stays_put():
     assert np.abs(by_gap.translation - by_force.translation).max() < 1e-4 * delta
 
 
+@pytest.mark.parametrize("sink", [1e-7, 1e-6])
+def test_a_sphere_sunk_into_the_lower_plate_rises_out_of_it(sink):
+    """A smaller sphere (0.8 R) beside a pressed one starts ``sink`` m into the lower plate,
+    out of the upper plate's reach: its lower contact pushes it up, and its equilibrium is
+    resting on the plate with no force (centre at 0.8 R, geometry). The Newton step lifts it
+    out of its only contact; a rule that gave no step to a particle no contact touched at the
+    step's end stalled it (and 25 pressed spheres of a dense layer at their first step)."""
+    bodies = [sphere(0.0, R), Body(Sphere(0.8 * R), MAT, centre=(3 * R, 0.0, 0.8 * R - sink))]
+    result = solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=0.5, gap=2 * R - 2e-6,
+                           numerics=COARSE)
+    check_balanced(result)
+    assert result.bodies[1].centre[2] == pytest.approx(0.8 * R, rel=0, abs=1e-3 * sink)
+    assert not result.force_residual[1].any()
+    assert sum(c.normal_force for c in result.contacts_of(1)) == 0.0
+    assert result.kinematics[1] == "free"
+
+
 # --- c: ties and numbering -------------------------------------------------------------------
 TILT = tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), MAT, 20.0)
 

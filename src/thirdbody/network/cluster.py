@@ -1186,10 +1186,13 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
         # earlier pass on other branches (a spring of an open contact that pass closed), which
         # the merit does not see but the trust region's common factor does: in a dense potato
         # layer free neighbours turned by 2e-2 rad and held the pressed potato to 0.7 % of its
-        # step, pass after pass, until the attempt stalled
+        # step, pass after pass, until the attempt stalled. A particle that a solved contact
+        # touches at the start keeps its step, even where the step opens every contact it
+        # has: a pressed sphere pushed out of its contacts by their force (its step is the
+        # way out, and zeroing it stalled 25 pressed spheres at their first step)
         touched = np.zeros(n, dtype=bool)
         for t, on in zip(terms, active, strict=True):
-            if on:
+            if on or t.bem:
                 touched[t.a] = True
                 if t.b is not None:
                     touched[t.b] = True
