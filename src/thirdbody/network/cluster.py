@@ -98,7 +98,7 @@ from .broad import candidate_pairs
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
 from .narrow import closest_approach
 from .plate import PlateContact, solve_plate
-from .stiffness import ContactModel, TangentialLaw
+from .stiffness import ContactModel, TangentialLaw, cross
 
 __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
            "ContactReport", "solve_cluster", "wrap"]
@@ -698,7 +698,7 @@ class _Problem:
             dc = new.centre - then.centre
             dphi = (new.rotation * then.rotation.inv()).as_rotvec()
             arm = 0.5 * ((o0 - then.centre) + (o1 - new.centre))
-            motion.append(dc + np.cross(dphi, arm))
+            motion.append(dc + cross(dphi, arm))
             mids.append(arm)
             turns.append(dphi)
         return motion[1] - motion[0], mids[0], mids[1], turns[0], turns[1]
@@ -863,8 +863,8 @@ def _terms(problem: _Problem, ev: _Evaluation) -> list[_Term]:
         base_a, base_b = m.base_blocks()
         f = k * p.sigma * m.normal                  # −N n with N = −k σ
         ra, rb = m.arms
-        wa = np.concatenate([f, np.cross(ra, f)])
-        wb = np.concatenate([-f, -np.cross(rb, f)])
+        wa = np.concatenate([f, cross(ra, f)])
+        wb = np.concatenate([-f, -cross(rb, f)])
         plate = p.roles[1] in PLATES
         a, b = (p.roles[0], None) if plate else p.roles
         terms.append(_Term(a, b, plate and p.roles[1] == "upper", m, base_a, base_b,
@@ -873,8 +873,8 @@ def _terms(problem: _Problem, ev: _Evaluation) -> list[_Term]:
     return terms
 
 
-def _components(n: int, terms: list[_Term]) -> list[list[int]]:
-    pairs = [(t.a, t.b) for t in terms if t.b is not None]
+def _components(n: int, pairs: list[tuple[int, int]]) -> list[list[int]]:
+    """The connected components of n particles linked by ``pairs``, each in ascending order."""
     if not pairs:
         return [[k] for k in range(n)]
     rows = [a for a, _ in pairs]
@@ -988,12 +988,14 @@ def _model(n: int, terms: list[_Term], active: list[bool], laws: list,
     return _Model(blocks, constant, h_col, h_row, h_diag, plate_constant)
 
 
-def _solve_model(problem: _Problem, model: _Model, groups, R: np.ndarray, plate: float,
+def _solve_model(problem: _Problem, model: _Model, R: np.ndarray, plate: float,
                  translate: bool = False) -> tuple[np.ndarray, float]:
     """The step (n, 6) and dh that zero the model's residuals, minimum-norm on modes without
-    stiffness; per connected component, in scaled units (rotations times size, moments over
-    size), the plate gap by a Schur complement. ``translate``: the rotations are held and the
-    moments left out (the first phase of a step, :func:`_iterate`)."""
+    stiffness; per connected component of the model (particles linked by an active pair
+    contact: an open one within reach does not link them), in scaled units (rotations times
+    size, moments over size), the plate gap by a Schur complement. ``translate``: the
+    rotations are held and the moments left out (the first phase of a step,
+    :func:`_iterate`)."""
     n = problem.n
     L = problem.sizes
     # unknowns in metres (a rotation as the arc at the particle's size: dq̂ = L dφ, so
@@ -1007,6 +1009,7 @@ def _solve_model(problem: _Problem, model: _Model, groups, R: np.ndarray, plate:
     by_row: dict[int, list] = {}
     for (r, c), blk in model.blocks.items():
         by_row.setdefault(r, []).append((c, blk))
+    groups = _components(n, [key for key in model.blocks if key[0] != key[1]])
     for group in groups:
         index = {k: m for m, k in enumerate(group)}
         size = 6 * len(group)
@@ -1130,7 +1133,6 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
     beyond it. Under force control, while no contact presses the upper plate its open
     contacts stay active. Returns (step, dh, model, active)."""
     n = problem.n
-    groups = _components(n, terms)
     step, dh = np.zeros((n, 6)), 0.0
     out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate, step, dh)
     merit = start_merit = _merit(problem, out, plate_out, scale, translate)
@@ -1151,7 +1153,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
     used = (start_active, start_laws)
     own = start_active == active and _same(start_laws, laws)
     trial, trial_dh = _solve_model(problem, _model(n, terms, start_active, start_laws,
-                                                          problem.correction), groups,
+                                                          problem.correction),
                                    R, plate, translate)
     for _ in range(2 * _ACTIVE_SET_PASSES):
         t = 1.0
@@ -1170,7 +1172,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
             # the start's branches (or the last pass's) lead nowhere from here: the Newton
             # step of the model at the step's own branches, a descent direction of its merit
             used, own = (active, laws), True
-            trial, trial_dh = _solve_model(problem, model, groups, R, plate, translate)
+            trial, trial_dh = _solve_model(problem, model, R, plate, translate)
             continue
         step, dh, merit = cand, cand_dh, cand_merit
         model, active, laws = cand_model, cand_active, cand_laws
@@ -1179,7 +1181,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
         if merit <= _MODEL_ROOT * start_merit:
             break           # the piecewise model's root to rounding
         used, own = (cand_active, cand_laws), True
-        trial, trial_dh = _solve_model(problem, cand_model, groups, R, plate, translate)
+        trial, trial_dh = _solve_model(problem, cand_model, R, plate, translate)
     if _REST_UNTOUCHED:
         # a particle that no active term touches at the step has no stiffness in its model:
         # its minimum-norm step is zero. The passes' damping can leave it the motion of an
