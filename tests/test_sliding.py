@@ -470,6 +470,27 @@ def test_a_sliding_flat_ellipsoid_dissipates_mu_min_f_n_per_unit_slid(flat_run):
     assert (ds.contact_dissipation.values >= -1e-20).all()
 
 
+# --- i: the sweep summary ---------------------------------------------------------------------
+def test_a_sliding_case_s_sweep_summary_has_its_steady_mu_eff(flat_run, tmp_path):
+    """The flat ellipsoid's results written as a sweep case and summarised: its sliding ends at
+    20 µm, so the steady state is the steps that end at 15 and 20 µm (steps 3 and 4, equal
+    increments: their plain mean and population deviation), where it slides at μ_low = 0.3."""
+    from thirdbody.io.results import write_results
+    from thirdbody.sweep.cases import _read_case
+    from thirdbody.sweep.summary import _case_summary, _summary_names
+
+    path = tmp_path / "case.nc"
+    write_results(flat_run, path)
+    out = _case_summary(_read_case(path, _summary_names()))
+    mu = flat_run.mu_eff_sliding.values
+    assert flat_run.sliding_distance.values[3:] == pytest.approx([15e-6, 20e-6])
+    assert out["final_sliding_distance"] == pytest.approx(4 * FLAT_STEP)
+    assert out["steady_mu_eff"] == pytest.approx((mu[3] + mu[4]) / 2, rel=1e-12)
+    assert out["steady_mu_eff_std"] == pytest.approx(abs(mu[4] - mu[3]) / 2, abs=1e-15)
+    assert (out["steady_mu_eff_min"], out["steady_mu_eff_max"]) == (min(mu[3:]), max(mu[3:]))
+    assert out["steady_mu_eff"] == pytest.approx(MU_LOW, rel=1e-4)
+
+
 def test_the_bundled_shear_example_is_a_slide_out_and_back():
     from importlib import resources
 

@@ -388,6 +388,7 @@ QUANTITIES: dict[str, str] = {
     "layer.size_std": "standard deviation of the size", "layer.count": "particle count",
     "layer.area_fraction": "area fraction", "layer.max_tilt_deg": "largest initial tilt",
     "layer.seed": "layer seed", "layer.E": r"$E$", "layer.nu": r"$\nu$",
+    "network.mu_pp": r"$\mu_\mathrm{pp}$",
 }
 
 #: how a unit is written after a quantity (none for a pure number)

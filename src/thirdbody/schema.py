@@ -417,6 +417,20 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
                                            "last step"),
     _v("final_fraction_rotate", "case", "1", "fraction of the loaded particles rotating at the "
                                              "last step"),
+    _v("steady_mu_eff", "case", "1",
+       "sliding runs: steady-state effective friction, the mean of mu_eff_sliding over the "
+       "steps that end in the last half of the sliding distance, each weighted by its "
+       "increment's length (NaN: the plates did not slide)"),
+    _v("steady_mu_eff_std", "case", "1",
+       "sliding runs: the spread of mu_eff_sliding over those steps, its standard deviation "
+       "(weighted as the mean; NaN: no sliding)"),
+    _v("steady_mu_eff_min", "case", "1", "sliding runs: the smallest mu_eff_sliding over "
+                                         "those steps (NaN: no sliding)"),
+    _v("steady_mu_eff_max", "case", "1", "sliding runs: the largest mu_eff_sliding over "
+                                         "those steps (NaN: no sliding)"),
+    _v("final_sliding_distance", "case", "m",
+       "sliding runs: the path length the upper plate slid by the last step done (0: it did "
+       "not slide)", fill=0.0),
 )}
 
 #: units of the configuration keys (a sweep's axes carry them; the docs list them)
@@ -430,6 +444,7 @@ PARAMETERS: dict[str, str] = {
     "numerics.resolution": "cells per particle size", "numerics.cell_size": "m",
     "layer.size": "m", "layer.size_std": "m", "layer.count": "1", "layer.area_fraction": "1",
     "layer.max_tilt_deg": "degree", "layer.seed": "1", "layer.E": "Pa", "layer.nu": "1",
+    "network.mu_pp": "1",
 }
 
 
