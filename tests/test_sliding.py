@@ -419,6 +419,64 @@ def test_the_shear_figure_draws_mu_eff_and_the_dilatancy_against_the_sliding_dis
     plt.close("all")
 
 
+def test_the_shear_figure_splits_the_energy_between_plate_and_particle_contacts(flat_run):
+    """The bottom panel, from the end of the compression (step 0): the plate's cumulative work,
+    the change of the elastic energy, the cumulative dissipation at the plate contacts and at
+    the particle–particle contacts (µJ), each summed here by hand from the step and contact
+    tables. The flat ellipsoid touches only plates: its particle curve is 0. Relabelling its
+    upper-plate contact as one with a particle (contact_j 0) moves that contact's dissipation
+    from the plate curve to the particle curve."""
+    pytest.importorskip("matplotlib")
+    import matplotlib.pyplot as plt
+
+    from thirdbody import plot
+
+    def drawn(ds):
+        fig = plot.shear_curve(ds)
+        assert len(fig.axes) == 3
+        lines = {ln.get_gid(): ln for ln in fig.axes[2].get_lines() if ln.get_gid()}
+        s = lines["plate_work"].get_xdata()
+        assert s == pytest.approx(1e6 * FLAT_STEP * np.arange(5))
+        out = {name: 1e-6 * np.asarray(ln.get_ydata()) for name, ln in lines.items()}
+        plt.close(fig)
+        return out
+
+    def by_hand(ds, kind):
+        """Σ over steps 1..k of the contact_dissipation of the rows of that step and kind."""
+        total, out = 0.0, [0.0]
+        for k in range(1, 5):
+            for step, j, lost in zip(ds.contact_step.values, ds.contact_j.values,
+                                     ds.contact_dissipation.values, strict=True):
+                if step == k and (j < 0) == (kind == "plate"):
+                    total += float(lost)
+            out.append(total)
+        return np.array(out)
+
+    ds = flat_run
+    lines = drawn(ds)
+    work = [0.0]
+    for k in range(1, 5):
+        work.append(work[-1] + float(ds.plate_work.values[k]))
+    assert lines["plate_work"] == pytest.approx(work, rel=1e-12, abs=1e-20)
+    energy = ds.elastic_energy.values
+    assert lines["elastic_energy"] == pytest.approx(energy - energy[0], rel=1e-12, abs=1e-20)
+    assert lines["dissipation_plate"] == pytest.approx(by_hand(ds, "plate"), rel=1e-12)
+    assert (lines["dissipation_particle"] == 0).all()
+    assert lines["energy_total"] == pytest.approx(
+        energy - energy[0] + by_hand(ds, "plate"), rel=1e-12)
+    # sliding at μ_low, the last two steps dissipate μ_low F_N Δs each at the plates
+    assert np.diff(lines["dissipation_plate"])[2:] == pytest.approx(MU_LOW * F * FLAT_STEP,
+                                                                    rel=1e-4)
+    relabelled = ds.assign(contact_j=ds.contact_j.where(ds.contact_j != -2, 0))
+    split = drawn(relabelled)
+    assert split["dissipation_plate"] == pytest.approx(by_hand(relabelled, "plate"), rel=1e-12)
+    assert split["dissipation_particle"] == pytest.approx(by_hand(relabelled, "particle"),
+                                                          rel=1e-12)
+    assert split["dissipation_particle"][-1] > 0
+    assert (split["dissipation_plate"] + split["dissipation_particle"]
+            == pytest.approx(lines["dissipation_plate"], rel=1e-12))
+
+
 def test_save_all_adds_the_shear_figure_to_a_sliding_run(sphere_run, tmp_path):
     from thirdbody import plot
 
