@@ -370,6 +370,10 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("contact_spots", "contact", "1", "number of separate contact spots", dtype="int64"),
     _v("contact_slip", "contact xyz", "m", "mean slip of j over i in the step over the "
                                            "slipping cells (0 if none)"),
+    _v("contact_shift_increment", "contact xyz", "m",
+       "rigid tangential displacement of j (or the plate) relative to i at the contact in the "
+       "step: the step's increment of the contact's tangential loading (its sum over the "
+       "steps of a contact that stays closed is the accumulated shift of Cattaneo-Mindlin)"),
     _v("contact_state", "contact", "1", "stick (some cells stick) or slide", dtype="int8",
        flags=CONTACT_STATES, fill="slide"),
     _v("contact_half_space_ratio", "contact", "1",

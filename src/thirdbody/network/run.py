@@ -381,6 +381,7 @@ class NetworkEngine:
             "contact_total_area": float(c.area), "contact_stick_area": float(c.stick_area),
             "contact_spots": int(c.spots),
             "contact_slip": tuple(float(v) for v in c.slip),
+            "contact_shift_increment": tuple(float(v) for v in c.shift_increment),
             "contact_state": c.state,
             "contact_half_space_ratio": float(c.half_space_ratio),
             "contact_mu": float(c.mu),
