@@ -182,6 +182,8 @@ SLIDING = ("plate_shift", "sliding_distance", "mu_eff", "mu_eff_magnitude", "mu_
            "dilatancy")
 ENERGY = ("plate_work", "elastic_energy", "dissipation", "energy_residual",
           "contact_elastic_energy", "contact_dissipation")
+#: the contacts' kinematics of a step (the shift increment, the travel over each surface)
+KINEMATICS = ("contact_shift_increment", "contact_rolling_i", "contact_rolling_j")
 
 
 def test_a_sliding_run_writes_the_plate_s_path_mu_eff_and_the_dilatancy(sphere_run):
@@ -233,8 +235,8 @@ def test_a_file_written_before_sliding_plates_reads_with_their_variables(sphere_
     new = upgrade(ds)
     for name in SLIDING:
         assert np.array_equal(new[name].values, ds[name].values, equal_nan=True), name
-    old = upgrade(ds.drop_vars([*SLIDING, *ENERGY]))
-    for name in ENERGY:
+    old = upgrade(ds.drop_vars([*SLIDING, *ENERGY, *KINEMATICS]))
+    for name in (*ENERGY, *KINEMATICS):
         assert old[name].dims == ds[name].dims and np.isnan(old[name].values).all(), name
     assert (old.plate_shift.values == 0).all() and (old.sliding_distance.values == 0).all()
     assert np.isnan(old.mu_eff_sliding.values).all() and np.isnan(old.dilatancy.values).all()
@@ -259,7 +261,7 @@ def test_a_sliding_run_resumed_mid_slide_ends_as_the_uninterrupted_one(sphere_ru
             blob = first.snapshot(current)
             break
     again = make().run(resume_from=blob)
-    for name in (*SLIDING, *ENERGY, "plate_gap", "position", "quaternion"):
+    for name in (*SLIDING, *ENERGY, *KINEMATICS, "plate_gap", "position", "quaternion"):
         assert np.array_equal(again[name].values, sphere_run[name].values, equal_nan=True), name
 
 
@@ -526,6 +528,70 @@ def test_a_sliding_flat_ellipsoid_dissipates_mu_min_f_n_per_unit_slid(flat_run):
     assert abs(ds.energy_residual.values[1]) < 0.01
     assert abs(ds.energy_residual.values[2]) < 0.05
     assert (ds.contact_dissipation.values >= -1e-20).all()
+
+
+# --- h2: rolling distances at the contacts -----------------------------------------------------
+def test_a_rolling_sphere_s_contact_points_travel_half_the_plate_s_step_over_every_surface(
+        sphere_run):
+    """Rolling without slip, the contact point moves over the sphere by the arc the sphere
+    turns, ρ Δθ with ρ = h/2 its distance from the centre and Δθ = Δs/h: Δs/2 (its chord
+    2ρ sin(Δθ/2) is 1e-6 less); over the lower plate it follows the centre, Δs/2, and over the
+    upper plate, which moved Δs while the point moved Δs/2, Δs/2 too. A contact of the
+    compression step is new: NaN."""
+    ds = sphere_run
+    steps = ds.contact_step.values
+    new = steps == 0
+    assert np.isnan(ds.contact_rolling_i.values[new]).all()
+    assert np.isnan(ds.contact_rolling_j.values[new]).all()
+    rho = hertz_gap(F) / 2
+    chord = 2 * rho * math.sin(STEP / (2 * rho) / 2)
+    assert chord == pytest.approx(STEP / 2, rel=2e-6)
+    assert ds.contact_rolling_i.values[~new] == pytest.approx(chord, rel=1e-5)
+    assert ds.contact_rolling_j.values[~new] == pytest.approx(STEP / 2, rel=1e-6)
+
+
+def test_a_sliding_contact_s_point_travels_over_the_plate_by_its_slip(flat_run):
+    """The flat ellipsoid once it slides (steps 3 and 4) moves with the upper plate without
+    turning: its contact points stay put on it and on the upper plate (measured 3e-5 of Δs),
+    and the lower contact's point travels over the lower plate by the plate's step Δs, its
+    slip (contact_slip; measured 6e-6 apart)."""
+    ds = flat_run
+    steps, j = ds.contact_step.values, ds.contact_j.values
+    for k in (3, 4):
+        up, low = (steps == k) & (j == -2), (steps == k) & (j == -1)
+        assert ds.contact_rolling_i.values[up | low] == pytest.approx(0.0, abs=1e-3 * FLAT_STEP)
+        assert ds.contact_rolling_j.values[up] == pytest.approx(0.0, abs=1e-3 * FLAT_STEP)
+        assert ds.contact_rolling_j.values[low] == pytest.approx(FLAT_STEP, rel=1e-3)
+        slip = np.linalg.norm(ds.contact_slip.values[low])
+        assert ds.contact_rolling_j.values[low] == pytest.approx(slip, rel=1e-3)
+
+
+def test_a_pair_contact_s_travel_is_told_apart_by_particle():
+    """Two spheres of radius R, a at the origin, b on top at (0, 0, 2R), the contact point at
+    (0, 0, R) throughout; in the step b turns by β about y in place: the point travels the
+    chord 2R sin(β/2) over b and nothing over a. contact_rolling_i is the travel over the
+    contact's particle i, whichever of the two the solve called a."""
+    from types import SimpleNamespace
+
+    from scipy.spatial.transform import Rotation
+
+    from thirdbody.network.body import Body
+    from thirdbody.network.run import _travel
+
+    beta = 0.3
+    shape = Sphere(R)
+    a = Body(shape, MAT, Rotation.identity(), np.zeros(3))
+    b0 = Body(shape, MAT, Rotation.identity(), np.array([0.0, 0.0, 2 * R]))
+    b1 = Body(shape, MAT, Rotation.from_rotvec([0.0, beta, 0.0]), np.array([0.0, 0.0, 2 * R]))
+    point = np.array([0.0, 0.0, R])
+    chord = 2 * R * math.sin(beta / 2)
+    for roles, i, expected in (((0, 1), 0, (0.0, chord)), ((1, 0), 0, (chord, 0.0))):
+        start = SimpleNamespace(solved=SimpleNamespace(a=a, b=b0, pressure_centroid=point))
+        end = SimpleNamespace(solved=SimpleNamespace(a=a, b=b1, pressure_centroid=point),
+                              key=(0, 1, (0, 0)), roles=roles)
+        assert _travel(start, end, i, (0.0, 0.0), (0.0, 0.0)) == pytest.approx(expected,
+                                                                                abs=1e-15)
+    assert all(math.isnan(v) for v in _travel(None, end, 0, (0.0, 0.0), (0.0, 0.0)))
 
 
 # --- i: the sweep summary ---------------------------------------------------------------------

@@ -374,6 +374,14 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
        "rigid tangential displacement of j (or the plate) relative to i at the contact in the "
        "step: the step's increment of the contact's tangential loading (its sum over the "
        "steps of a contact that stays closed is the accumulated shift of Cattaneo-Mindlin)"),
+    _v("contact_rolling_i", "contact", "m",
+       "distance the contact point (pressure centroid) travelled over particle i's surface in "
+       "the step, from i's rigid motion: the chord between its positions in i's body frame "
+       "at the step's start and end (NaN for a contact new in the step)"),
+    _v("contact_rolling_j", "contact", "m",
+       "the same over particle j's surface, or over the plate's (the upper plate's frame "
+       "moving with its shift); rolling without slip: equal to contact_rolling_i, sliding: "
+       "they differ by the slip"),
     _v("contact_state", "contact", "1", "stick (some cells stick) or slide", dtype="int8",
        flags=CONTACT_STATES, fill="slide"),
     _v("contact_half_space_ratio", "contact", "1",
