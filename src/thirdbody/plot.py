@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["contact_maps", "energy_split", "layer_top_view", "load_shares", "orientation_history",
-           "particle_ratios", "quantity_label", "save_all", "save_state_map", "shear_curve",
-           "slides", "state_curve", "state_fractions", "state_map"]
+__all__ = ["contact_maps", "energy_split", "friction_map", "layer_top_view", "load_shares",
+           "orientation_history", "particle_ratios", "quantity_label", "save_all",
+           "save_state_map", "shear_curve", "slides", "state_curve", "state_fractions",
+           "state_map"]
 
 _STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
 
@@ -533,10 +534,73 @@ def state_map(summary, x: str | None = None, y: str | None = None):
     return fig
 
 
+def _sweep_slides(summary) -> bool:
+    """Some case of the sweep slid its plates (a finite steady-state μ_eff)."""
+    return "steady_mu_eff" in summary and bool(np.isfinite(summary.steady_mu_eff.values).any())
+
+
+def friction_map(summary, x: str | None = None, y: str | None = None):
+    """The sweep's map of the steady-state effective friction of its sliding cases: per case
+    ``steady_mu_eff`` in colour, written in the cell with its spread (± ``steady_mu_eff_std``),
+    grey where the case did not slide (or is missing). ``x``, ``y``: sweep dimensions
+    (default the first two); further dimensions become rows of panels (at most six)."""
+    plt = _plt()
+
+    mu = summary.steady_mu_eff
+    dims = list(mu.dims)
+    if not dims:
+        raise ValueError("the summary has no sweep dimension")
+    x = x or dims[0]
+    y = y or (next((d for d in dims if d != x), None))
+    for name in (x, y):
+        if name is not None and name not in dims:
+            raise ValueError(f"{name!r} is not a sweep dimension; choose from {dims}")
+    rest = [d for d in dims if d not in (x, y)]
+    combos = list(itertools_product(*[range(summary.sizes[d]) for d in rest]))[:6]
+    finite = mu.values[np.isfinite(mu.values)]
+    low, high = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    if high <= low:
+        low, high = low - 0.05, high + 0.05
+    fig, axes = plt.subplots(len(combos), 1, figsize=(6.4, 4.4 * len(combos) + 0.4),
+                             squeeze=False, constrained_layout=True)
+    order = (y, x) if y else (x,)
+    for row, combo in enumerate(combos):
+        sel = {d: i for d, i in zip(rest, combo, strict=True)}
+        part = summary.isel(sel)
+        where = ", ".join(_value_text(summary, d, summary[d].values[i].item())
+                          for d, i in sel.items())
+        values = part.steady_mu_eff.transpose(*order).values.reshape(-1, part.sizes[x])
+        spread = part.steady_mu_eff_std.transpose(*order).values.reshape(values.shape)
+        ax = axes[row][0]
+        ax.set_facecolor("0.88")
+        im = ax.imshow(np.ma.masked_invalid(values), origin="lower", cmap="viridis",
+                       vmin=low, vmax=high, aspect="auto", interpolation="nearest")
+        for (i, j), value in np.ndenumerate(values):
+            if value == value:
+                shade = (value - low) / (high - low)
+                ax.text(j, i, f"{value:.3f}\n±{spread[i, j]:.2g}", ha="center", va="center",
+                        fontsize=7, color="black" if shade > 0.6 else "white")
+        fig.colorbar(im, ax=ax, label=r"steady-state $\mu_\mathrm{eff}$", shrink=0.85)
+        ax.set_title("steady-state effective friction, mean ± spread over the last half of "
+                     "the sliding\n(grey: did not slide)" + (f" ({where})" if where else ""),
+                     fontsize=9)
+        ax.set_xticks(*_ticks(summary, x))
+        ax.set_xlabel(_axis_label(summary, x))
+        ax.set_yticks(*_ticks(summary, y))
+        ax.set_ylabel(_axis_label(summary, y) if y else "")
+    fig.suptitle(f"thirdbody sweep: {summary.attrs.get('cases', '?')} cases, "
+                 f"{summary.attrs.get('failed', 0)} not complete", fontsize=10)
+    return fig
+
+
 def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
                    ) -> list[Path]:
-    """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``."""
-    return _save_figures(_plt(), {"state_map": state_map(summary)}, out, formats)
+    """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``, and for a
+    sweep of sliding cases ``friction_map.png`` (:func:`friction_map`)."""
+    figures = {"state_map": state_map(summary)}
+    if _sweep_slides(summary):
+        figures["friction_map"] = friction_map(summary)
+    return _save_figures(_plt(), figures, out, formats)
 
 
 # --- layers ------------------------------------------------------------------------------------
