@@ -314,7 +314,7 @@ def test_state_map_says_when_every_first_turn_is_at_the_same_force():
     assert image.colorbar is None and "no case turned" in ax.get_title()
 
 
-def test_a_sweep_of_sliding_cases_maps_its_steady_mu_eff(tmp_path):
+def test_a_sweep_of_sliding_cases_maps_its_steady_mu_eff(monkeypatch):
     """The friction map draws each case's steady_mu_eff over μ and θ₀ (grey, masked, where a
     case did not slide), written with its spread; save_state_map adds it only to a sweep in
     which some case slid."""
@@ -335,8 +335,11 @@ def test_a_sweep_of_sliding_cases_maps_its_steady_mu_eff(tmp_path):
     assert texts[(0, 0)] == "0.100\n±0.002" and texts[(3, 2)] == f"{mu[3, 2]:.3f}\n±0.002"
     assert (2, 1) not in texts and len(texts) == 11
     assert ax.get_xlabel() == r"$\mu$" and ax.get_ylabel() == r"$\theta_0$ (°)"
-    written = plot.save_state_map(s, tmp_path / "slid", formats=("png",))
-    assert sorted(p.name for p in written) == ["friction_map.png", "state_map.png"]
+    saved = []                                  # what save_state_map hands to be written
+    monkeypatch.setattr(plot, "_save_figures", lambda plt, figures, out, formats: (
+        saved.extend(figures), [plt.close(f) for f in figures.values()]))
+    plot.save_state_map(s, "unused", formats=("png",))
+    assert sorted(saved) == ["friction_map", "state_map"]
     assert not plot._sweep_slides(s.assign(steady_mu_eff=s.steady_mu_eff * np.nan))
     assert not plot._sweep_slides(s.drop_vars("steady_mu_eff"))     # an older summary
 
