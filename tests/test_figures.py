@@ -314,6 +314,36 @@ def test_state_map_says_when_every_first_turn_is_at_the_same_force():
     assert image.colorbar is None and "no case turned" in ax.get_title()
 
 
+def test_a_sweep_of_sliding_cases_maps_its_steady_mu_eff(monkeypatch):
+    """The friction map draws each case's steady_mu_eff over μ and θ₀ (grey, masked, where a
+    case did not slide), written with its spread; save_state_map adds it only to a sweep in
+    which some case slid."""
+    s = summary(np.full((4, 3), np.nan))
+    mu = np.arange(12.0).reshape(4, 3) / 40 + 0.1
+    mu[2, 1] = np.nan
+    std = np.full((4, 3), 0.002)
+    s = s.assign(steady_mu_eff=(("mu", "orientation_deg"), mu),
+                 steady_mu_eff_std=(("mu", "orientation_deg"), std))
+    fig = plot.friction_map(s, x="mu", y="orientation_deg")
+    assert_readable(fig)
+    (ax,) = [a for a in fig.axes if a.images]
+    image = ax.images[0].get_array()
+    assert image.shape == (3, 4)                      # θ₀ along y, μ along x
+    assert np.ma.getmaskarray(image)[1, 2] and np.ma.getmaskarray(image).sum() == 1
+    assert image.filled(np.nan)[~np.isnan(mu.T)] == pytest.approx(mu.T[~np.isnan(mu.T)])
+    texts = {(t.get_position()): t.get_text() for t in ax.texts}
+    assert texts[(0, 0)] == "0.100\n±0.002" and texts[(3, 2)] == f"{mu[3, 2]:.3f}\n±0.002"
+    assert (2, 1) not in texts and len(texts) == 11
+    assert ax.get_xlabel() == r"$\mu$" and ax.get_ylabel() == r"$\theta_0$ (°)"
+    saved = []                                  # what save_state_map hands to be written
+    monkeypatch.setattr(plot, "_save_figures", lambda plt, figures, out, formats: (
+        saved.extend(figures), [plt.close(f) for f in figures.values()]))
+    plot.save_state_map(s, "unused", formats=("png",))
+    assert sorted(saved) == ["friction_map", "state_map"]
+    assert not plot._sweep_slides(s.assign(steady_mu_eff=s.steady_mu_eff * np.nan))
+    assert not plot._sweep_slides(s.drop_vars("steady_mu_eff"))     # an older summary
+
+
 def test_every_configuration_key_has_a_quantity_label():
     for key, units in schema.PARAMETERS.items():
         label = plot.quantity_label(key)

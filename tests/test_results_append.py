@@ -4,6 +4,7 @@ are appended too, a run resumes from an appended file or from an earlier version
 run killed at random moments always leaves a readable file of exactly the completed steps that
 resumes to the uninterrupted result."""
 
+import functools
 import os
 import signal
 import subprocess
@@ -30,6 +31,18 @@ def potato_sim(steps=8, maps_every=1):
     return tb.Simulation(tb.Particle(shape, tb.Material(1e9, 0.3), 20.0), tb.Plates(0.46),
                          tb.LinearRamp(stop=10.0, steps=steps), resolution=30,
                          maps_every=maps_every)
+
+
+@functools.cache
+def _straight_run(steps):
+    return potato_sim(steps=steps).run()
+
+
+def straight_run(steps=8):
+    """The uninterrupted in-memory run of ``potato_sim(steps)`` that a saved, resumed or
+    interrupted run must equal: computed once per process (several tests compare with it), each
+    caller gets a deep copy, so no test sees another's changes."""
+    return _straight_run(steps).copy(deep=True)
 
 
 def layer_sim():
@@ -81,7 +94,7 @@ def test_every_saved_file_is_the_run_so_far_and_the_last_is_the_whole_run(monkey
     assert RESUME_VARIABLE not in final and results.STEP_HISTORY_VARIABLE not in final
     xr.testing.assert_identical(final, ds)
     # the appended maps are the maps of an uninterrupted in-memory run, cell by cell
-    plain = potato_sim(steps=6).run()
+    plain = straight_run(steps=6)
     timers = [v for v in ds.data_vars if v.startswith("time_")]
     xr.testing.assert_identical(final.drop_vars(timers), plain.drop_vars(timers))
 
@@ -138,7 +151,7 @@ def test_a_file_of_the_earlier_format_still_resumes(tmp_path):
         sim.run(checkpoint=old_style)
     assert results.STEP_HISTORY_VARIABLE not in open_results(path)
     run_to_file(potato_sim(steps=4), path, resume=True)
-    straight = potato_sim(steps=4).run()
+    straight = straight_run(steps=4)
     timers = [v for v in straight.data_vars if v.startswith("time_")]
     xr.testing.assert_identical(open_results(path).drop_vars(timers),
                                 straight.drop_vars(timers))

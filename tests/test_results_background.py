@@ -18,7 +18,7 @@ import pytest
 import xarray as xr
 
 import thirdbody.io.results as results
-from test_results_append import layer_sim, potato_sim, steps_on_disk, stop_after
+from test_results_append import layer_sim, potato_sim, steps_on_disk, stop_after, straight_run
 from thirdbody.cli.lock import LOCK_NAME
 from thirdbody.io import open_results, run_to_file
 
@@ -73,7 +73,7 @@ def test_an_interrupted_run_leaves_every_computed_step_and_resumes(tmp_path, chi
     assert partial.step.values.tolist() == [0, 1, 2]
     assert partial.attrs["status"] == "running"
     run_to_file(potato_sim(steps=8), path, resume=True, background=True)
-    straight = potato_sim(steps=8).run()
+    straight = straight_run(steps=8)
     xr.testing.assert_identical(open_results(path).drop_vars(_timers(straight)),
                                 straight.drop_vars(_timers(straight)))
 
@@ -152,7 +152,7 @@ def test_a_run_killed_or_interrupted_leaves_the_steps_it_had_sent(how, tmp_path)
     assert on_disk.step.values.tolist() == [0, 1, 2]
     assert on_disk[results.STEP_HISTORY_VARIABLE].size == 3
     run_to_file(potato_sim(steps=8), path, resume=True)
-    straight = potato_sim(steps=8).run()
+    straight = straight_run(steps=8)
     xr.testing.assert_identical(open_results(path).drop_vars(_timers(straight)),
                                 straight.drop_vars(_timers(straight)))
 
@@ -233,7 +233,7 @@ def test_steps_bigger_than_the_pipe_all_reach_the_file(monkeypatch, tmp_path, ch
     assert children[0].stats["appended"] == 5
     assert waiting == [0] * 6
     assert max(children[0].frame_bytes) > 4096
-    straight = potato_sim(steps=6).run()
+    straight = straight_run(steps=6)
     xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
                                 straight.drop_vars(_timers(ds)))
 
@@ -277,7 +277,7 @@ def test_the_run_waits_for_a_child_more_than_a_few_steps_behind(monkeypatch, tmp
     assert max(behind) <= bound and waiting == [0] * 8
     assert all(opened for step, opened in computed if step > bound), computed
     assert children[0].stats["appended"] == 7
-    straight = potato_sim(steps=8).run()
+    straight = straight_run(steps=8)
     xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
                                 straight.drop_vars(_timers(ds)))
 
@@ -311,6 +311,6 @@ def test_the_run_does_not_wait_for_a_child_that_is_not_ready_yet(monkeypatch, tm
         fallback.cancel()
     assert opened_by == ["the run"]
     assert children[0].stats["appended"] == 7
-    straight = potato_sim(steps=8).run()
+    straight = straight_run(steps=8)
     xr.testing.assert_identical(open_results(tmp_path / "r.nc").drop_vars(_timers(ds)),
                                 straight.drop_vars(_timers(ds)))

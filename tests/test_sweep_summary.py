@@ -7,6 +7,7 @@ import json
 import math
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 
@@ -58,3 +59,46 @@ def test_final_ratios_are_signed_like_the_state_plot():
     assert _signed(ds)[-1] == -1.0
     kept = _case_summary(_case(q, [0, 0, 0], [[1.0, 0.0]] * 3, [0.2, 0.3, 0.4]))
     assert kept["final_ratio_low"] == 0.4
+
+
+def test_the_steady_mu_eff_of_a_sliding_case_is_over_the_last_half_of_its_distance():
+    """Compression (2 steps, no sliding), then increments of 1, 1, 2, 1, 3 µm: 8 µm in all.
+    The last half, (4, 8] µm, holds the steps that end at 5 and 8 µm (the one ending at 4 µm
+    slid in the first half); their μ_eff 0.3 and 0.4, weighted by their increments 1 and
+    3 µm: mean (0.3 + 3 · 0.4) / 4 = 0.375, deviation √((0.075² + 3 · 0.025²) / 4)
+    = 0.04330, smallest 0.3, largest 0.4."""
+    from thirdbody.sweep import _case_summary
+
+    distance = 1e-6 * np.array([0.0, 0.0, 1.0, 2.0, 4.0, 5.0, 8.0])
+    mu = np.array([np.nan, np.nan, 0.1, 0.2, 0.25, 0.3, 0.4])
+    n = len(mu)
+    q = [Rotation.from_euler("y", 20, degrees=True).as_quat()] * n
+    case = _case(q, [0] * n, [[1.0, 0.0]] * n, np.full(n, 0.3))
+    case.arrays.update(sliding_distance=distance, mu_eff_sliding=mu)
+    out = _case_summary(case)
+    assert out["steady_mu_eff"] == pytest.approx(0.375, rel=1e-12)
+    assert out["steady_mu_eff_std"] == pytest.approx(math.sqrt((0.075**2 + 3 * 0.025**2) / 4),
+                                                     rel=1e-12)
+    assert out["steady_mu_eff_std"] == pytest.approx(0.0433013, rel=1e-6)
+    assert (out["steady_mu_eff_min"], out["steady_mu_eff_max"]) == (0.3, 0.4)
+    assert out["final_sliding_distance"] == 8e-6
+    # the plates never slid (or a file from before sliding plates): NaN, distance 0
+    case.arrays.update(sliding_distance=np.zeros(n), mu_eff_sliding=np.full(n, np.nan))
+    still = _case_summary(case)
+    for name in ("steady_mu_eff", "steady_mu_eff_std", "steady_mu_eff_min",
+                 "steady_mu_eff_max"):
+        assert math.isnan(still[name]), name
+    assert still["final_sliding_distance"] == 0.0
+    for name in ("sliding_distance", "mu_eff_sliding"):
+        del case.arrays[name]
+    assert math.isnan(_case_summary(case)["steady_mu_eff"])
+
+
+def test_the_summary_names_its_steady_mu_eff_with_units():
+    from thirdbody import schema
+
+    for name in ("steady_mu_eff", "steady_mu_eff_std", "steady_mu_eff_min",
+                 "steady_mu_eff_max"):
+        assert schema.VARIABLES[name].kind == "summary" and schema.VARIABLES[name].units == "1"
+    assert schema.VARIABLES["final_sliding_distance"].units == "m"
+    assert schema.parameter_units("network.mu_pp") == "1"

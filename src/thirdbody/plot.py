@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["contact_maps", "layer_top_view", "load_shares", "orientation_history",
-           "particle_ratios", "quantity_label", "save_all", "save_state_map", "shear_curve",
-           "slides", "state_curve", "state_fractions", "state_map"]
+__all__ = ["contact_maps", "energy_split", "friction_map", "layer_top_view", "load_shares",
+           "orientation_history", "particle_ratios", "quantity_label", "save_all",
+           "save_state_map", "shear_curve", "slides", "state_curve", "state_fractions",
+           "state_map"]
 
 _STATUS_COLOURS = ("white", "black", "0.6")          # open, stick, slip
 
@@ -388,6 +389,7 @@ QUANTITIES: dict[str, str] = {
     "layer.size_std": "standard deviation of the size", "layer.count": "particle count",
     "layer.area_fraction": "area fraction", "layer.max_tilt_deg": "largest initial tilt",
     "layer.seed": "layer seed", "layer.E": r"$E$", "layer.nu": r"$\nu$",
+    "network.mu_pp": r"$\mu_\mathrm{pp}$",
 }
 
 #: how a unit is written after a quantity (none for a pure number)
@@ -532,10 +534,73 @@ def state_map(summary, x: str | None = None, y: str | None = None):
     return fig
 
 
+def _sweep_slides(summary) -> bool:
+    """Some case of the sweep slid its plates (a finite steady-state μ_eff)."""
+    return "steady_mu_eff" in summary and bool(np.isfinite(summary.steady_mu_eff.values).any())
+
+
+def friction_map(summary, x: str | None = None, y: str | None = None):
+    """The sweep's map of the steady-state effective friction of its sliding cases: per case
+    ``steady_mu_eff`` in colour, written in the cell with its spread (± ``steady_mu_eff_std``),
+    grey where the case did not slide (or is missing). ``x``, ``y``: sweep dimensions
+    (default the first two); further dimensions become rows of panels (at most six)."""
+    plt = _plt()
+
+    mu = summary.steady_mu_eff
+    dims = list(mu.dims)
+    if not dims:
+        raise ValueError("the summary has no sweep dimension")
+    x = x or dims[0]
+    y = y or (next((d for d in dims if d != x), None))
+    for name in (x, y):
+        if name is not None and name not in dims:
+            raise ValueError(f"{name!r} is not a sweep dimension; choose from {dims}")
+    rest = [d for d in dims if d not in (x, y)]
+    combos = list(itertools_product(*[range(summary.sizes[d]) for d in rest]))[:6]
+    finite = mu.values[np.isfinite(mu.values)]
+    low, high = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    if high <= low:
+        low, high = low - 0.05, high + 0.05
+    fig, axes = plt.subplots(len(combos), 1, figsize=(6.4, 4.4 * len(combos) + 0.4),
+                             squeeze=False, constrained_layout=True)
+    order = (y, x) if y else (x,)
+    for row, combo in enumerate(combos):
+        sel = {d: i for d, i in zip(rest, combo, strict=True)}
+        part = summary.isel(sel)
+        where = ", ".join(_value_text(summary, d, summary[d].values[i].item())
+                          for d, i in sel.items())
+        values = part.steady_mu_eff.transpose(*order).values.reshape(-1, part.sizes[x])
+        spread = part.steady_mu_eff_std.transpose(*order).values.reshape(values.shape)
+        ax = axes[row][0]
+        ax.set_facecolor("0.88")
+        im = ax.imshow(np.ma.masked_invalid(values), origin="lower", cmap="viridis",
+                       vmin=low, vmax=high, aspect="auto", interpolation="nearest")
+        for (i, j), value in np.ndenumerate(values):
+            if value == value:
+                shade = (value - low) / (high - low)
+                ax.text(j, i, f"{value:.3f}\n±{spread[i, j]:.2g}", ha="center", va="center",
+                        fontsize=7, color="black" if shade > 0.6 else "white")
+        fig.colorbar(im, ax=ax, label=r"steady-state $\mu_\mathrm{eff}$", shrink=0.85)
+        ax.set_title("steady-state effective friction, mean ± spread over the last half of "
+                     "the sliding\n(grey: did not slide)" + (f" ({where})" if where else ""),
+                     fontsize=9)
+        ax.set_xticks(*_ticks(summary, x))
+        ax.set_xlabel(_axis_label(summary, x))
+        ax.set_yticks(*_ticks(summary, y))
+        ax.set_ylabel(_axis_label(summary, y) if y else "")
+    fig.suptitle(f"thirdbody sweep: {summary.attrs.get('cases', '?')} cases, "
+                 f"{summary.attrs.get('failed', 0)} not complete", fontsize=10)
+    return fig
+
+
 def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
                    ) -> list[Path]:
-    """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``."""
-    return _save_figures(_plt(), {"state_map": state_map(summary)}, out, formats)
+    """Write ``state_map.png`` (and ``.pdf``) for a sweep summary into ``out``, and for a
+    sweep of sliding cases ``friction_map.png`` (:func:`friction_map`)."""
+    figures = {"state_map": state_map(summary)}
+    if _sweep_slides(summary):
+        figures["friction_map"] = friction_map(summary)
+    return _save_figures(_plt(), figures, out, formats)
 
 
 # --- layers ------------------------------------------------------------------------------------
@@ -828,12 +893,48 @@ def slides(ds) -> bool:
                                                        initial=0.0) > 0)
 
 
+def energy_split(ds, start: int = 0) -> dict[str, np.ndarray]:
+    """Where the plates' work went, step by step, from the end of step ``start`` (all 0 there):
+    the cumulative work of the upper plate ``plate_work`` (Σ plate_work), the change of the
+    stored ``elastic_energy``, and the cumulative frictional dissipation at the plate contacts
+    (``dissipation_plate``: the contact table's rows with ``contact_j`` < 0) and at the
+    particle–particle contacts (``dissipation_particle``), each an array over the steps from
+    ``start`` (J). Their balance: plate_work ≈ elastic_energy + both dissipations."""
+    n = ds.sizes["step"]
+    steps = ds.contact_step.values.astype(int)
+    plate = ds.contact_j.values < 0
+    lost = np.nan_to_num(ds.contact_dissipation.values.astype(float))
+    by_step = {kind: np.bincount(steps[rows], weights=lost[rows], minlength=n)[:n]
+               for kind, rows in (("plate", plate), ("particle", ~plate))}
+    rows = slice(start + 1, None)
+
+    def cumulative(values: np.ndarray) -> np.ndarray:
+        return np.concatenate([[0.0], np.cumsum(np.nan_to_num(values[rows]))])
+
+    elastic = ds.elastic_energy.values.astype(float)
+    return {"plate_work": cumulative(ds.plate_work.values.astype(float)),
+            "elastic_energy": elastic[start:] - elastic[start],
+            "dissipation_plate": cumulative(by_step["plate"]),
+            "dissipation_particle": cumulative(by_step["particle"])}
+
+
+def _has_energy(ds) -> bool:
+    return all(name in ds for name in ("contact_dissipation", "contact_j", "contact_step",
+                                       "plate_work", "elastic_energy")) and bool(
+        np.isfinite(ds.plate_work.values).any())
+
+
 def shear_curve(ds):
-    """The shear test: the effective friction (top) and the dilatancy (bottom) against the
+    """The shear test: the effective friction (top) and the dilatancy (middle) against the
     sliding distance (the path length of the upper plate, µm), from the end of the compression
     (s = 0, dilatancy 0). μ_eff is drawn along the sliding (``mu_eff_sliding``: > 0 where the
     layer resists the plate's motion) and as a magnitude |F_T|/F_N (dashed); dotted vertical
-    lines mark where the plate changed direction (a reversal or a corner of its path)."""
+    lines mark where the plate changed direction (a reversal or a corner of its path). For a
+    run with the energy balance, a bottom panel splits the energy (µJ) since the end of the
+    compression (:func:`energy_split`): the plate's cumulative work, the change of the
+    elastic energy, the cumulative dissipation at the plate contacts and at the
+    particle–particle contacts, and the elastic energy plus both dissipations (dashed: on
+    the work where the balance closes)."""
     plt = _plt()
     distance = ds.sliding_distance.values
     moving = np.flatnonzero(distance > 0)
@@ -848,8 +949,10 @@ def shear_curve(ds):
     dilatancy = np.nan_to_num(ds.dilatancy.values.astype(float))
     rows = slice(start, None)
     s = distance[rows] * 1e6
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.6), sharex=True,
-                                      constrained_layout=True)
+    energy = _has_energy(ds)
+    fig, axes = plt.subplots(3 if energy else 2, 1, figsize=(6.4, 8.2 if energy else 5.6),
+                             sharex=True, constrained_layout=True)
+    top, bottom = axes[:2]
     top.axhline(0.0, color="0.6", lw=0.8)
     top.plot(s, along[rows], "o-", color="C0", ms=3, label=r"$\mu_\mathrm{eff}$ along the "
                                                          "sliding (> 0: resisting)")
@@ -865,14 +968,29 @@ def shear_curve(ds):
     bottom.axhline(0.0, color="0.6", lw=0.8)
     bottom.plot(s, dilatancy[rows] * 1e6, "o-", color="k", ms=3)
     bottom.set_ylabel(r"dilatancy $h - h_c$ (µm)")
-    bottom.set_xlabel("sliding distance (µm, path length of the upper plate)")
+    if energy:
+        split = energy_split(ds, start)
+        ax = axes[2]
+        ax.axhline(0.0, color="0.6", lw=0.8)
+        for name, label, style in (
+                ("plate_work", "work of the plate", dict(color="k", marker="o", ms=3)),
+                ("elastic_energy", "elastic energy (change)", dict(color="C4")),
+                ("dissipation_plate", "dissipated at plate contacts", dict(color="C3")),
+                ("dissipation_particle", "dissipated between particles", dict(color="C0"))):
+            ax.plot(s, 1e6 * split[name], label=label, gid=name, **style)
+        ax.plot(s, 1e6 * (split["elastic_energy"] + split["dissipation_plate"]
+                          + split["dissipation_particle"]), "--", color="0.4",
+                label="elastic + dissipated", gid="energy_total")
+        ax.set_ylabel("energy since the compression (µJ)")
+        ax.legend(fontsize=8)
+    axes[-1].set_xlabel("sliding distance (µm, path length of the upper plate)")
     # a change of direction: an increment not along the one before
     steps = increments[first:]
     norms = np.linalg.norm(steps, axis=1)
     for k in range(1, len(steps)):
         if norms[k] > 0 and norms[k - 1] > 0 and (
                 steps[k] @ steps[k - 1] < (1 - 1e-9) * norms[k] * norms[k - 1]):
-            for ax in (top, bottom):
+            for ax in axes:
                 ax.axvline(distance[first + k - 1] * 1e6, color="0.5", lw=0.8, ls=":",
                            gid="reversal")
     title = _layer_title(ds) if ds.sizes.get("particle", 1) > 1 else _title(_one(ds))

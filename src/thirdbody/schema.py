@@ -370,6 +370,18 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("contact_spots", "contact", "1", "number of separate contact spots", dtype="int64"),
     _v("contact_slip", "contact xyz", "m", "mean slip of j over i in the step over the "
                                            "slipping cells (0 if none)"),
+    _v("contact_shift_increment", "contact xyz", "m",
+       "rigid tangential displacement of j (or the plate) relative to i at the contact in the "
+       "step: the step's increment of the contact's tangential loading (its sum over the "
+       "steps of a contact that stays closed is the accumulated shift of Cattaneo-Mindlin)"),
+    _v("contact_rolling_i", "contact", "m",
+       "distance the contact point (pressure centroid) travelled over particle i's surface in "
+       "the step, from i's rigid motion: the chord between its positions in i's body frame "
+       "at the step's start and end (NaN for a contact new in the step)"),
+    _v("contact_rolling_j", "contact", "m",
+       "the same over particle j's surface, or over the plate's (the upper plate's frame "
+       "moving with its shift); rolling without slip: equal to contact_rolling_i, sliding: "
+       "they differ by the slip"),
     _v("contact_state", "contact", "1", "stick (some cells stick) or slide", dtype="int8",
        flags=CONTACT_STATES, fill="slide"),
     _v("contact_half_space_ratio", "contact", "1",
@@ -417,6 +429,20 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
                                            "last step"),
     _v("final_fraction_rotate", "case", "1", "fraction of the loaded particles rotating at the "
                                              "last step"),
+    _v("steady_mu_eff", "case", "1",
+       "sliding runs: steady-state effective friction, the mean of mu_eff_sliding over the "
+       "steps that end in the last half of the sliding distance, each weighted by its "
+       "increment's length (NaN: the plates did not slide)"),
+    _v("steady_mu_eff_std", "case", "1",
+       "sliding runs: the spread of mu_eff_sliding over those steps, its standard deviation "
+       "(weighted as the mean; NaN: no sliding)"),
+    _v("steady_mu_eff_min", "case", "1", "sliding runs: the smallest mu_eff_sliding over "
+                                         "those steps (NaN: no sliding)"),
+    _v("steady_mu_eff_max", "case", "1", "sliding runs: the largest mu_eff_sliding over "
+                                         "those steps (NaN: no sliding)"),
+    _v("final_sliding_distance", "case", "m",
+       "sliding runs: the path length the upper plate slid by the last step done (0: it did "
+       "not slide)", fill=0.0),
 )}
 
 #: units of the configuration keys (a sweep's axes carry them; the docs list them)
@@ -430,6 +456,7 @@ PARAMETERS: dict[str, str] = {
     "numerics.resolution": "cells per particle size", "numerics.cell_size": "m",
     "layer.size": "m", "layer.size_std": "m", "layer.count": "1", "layer.area_fraction": "1",
     "layer.max_tilt_deg": "degree", "layer.seed": "1", "layer.E": "Pa", "layer.nu": "1",
+    "network.mu_pp": "1",
 }
 
 

@@ -197,7 +197,8 @@ _NETWORK_ERA = {"fraction_slide": 0.0, "plate_normal_force": None, "translation"
                 # the energy balance of a network run's step (NaN before it)
                 "plate_work": None, "elastic_energy": None, "dissipation": None,
                 "energy_residual": None, "contact_elastic_energy": None,
-                "contact_dissipation": None}
+                "contact_dissipation": None, "contact_shift_increment": None,
+                "contact_rolling_i": None, "contact_rolling_j": None}
 
 
 def _added_variables(ds):

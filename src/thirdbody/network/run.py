@@ -217,7 +217,7 @@ class NetworkEngine:
         displacement = state.displacement + result.translation
         energy = self._energy(step, state, result)
         record = self._record(k, step, result, starts, displacement, sliding, energy,
-                              time.perf_counter() - t0)
+                              time.perf_counter() - t0, state.histories, state.plate_shift)
         state.bodies, state.histories, state.gap = bodies, histories, result.gap
         state.displacement = displacement
         (state.plate_shift, state.sliding_distance, state.slide_gap,
@@ -252,7 +252,8 @@ class NetworkEngine:
 
     # --- the step's records ------------------------------------------------------------------
     def _record(self, k: int, step: LoadStep, result: ClusterResult, starts, displacement,
-                sliding: _Sliding, energy: dict, seconds: float) -> LayerRecord:
+                sliding: _Sliding, energy: dict, seconds: float, state_histories: dict,
+                state_shift) -> LayerRecord:
         n = len(result.bodies)
         plate = {i: {} for i in range(n)}
         touching = [[] for _ in range(n)]          # each particle's loaded contacts
@@ -305,7 +306,10 @@ class NetworkEngine:
             if var.derive is not None:
                 for r in records:
                     r.values[var.name] = var.derive(r.values)
-        rows = [self._row(k, c, result.histories[c.key].solved) for c in result.contacts]
+        rows = [self._row(k, c, result.histories[c.key].solved,
+                          _travel(state_histories.get(c.key), result.histories[c.key],
+                                  c.i, state_shift, sliding.plate_shift))
+                for c in result.contacts]
         return LayerRecord(k, step.kind, records, values, contacts=rows)
 
     def _particle(self, k: int, step: LoadStep, i: int, body: Body, result: ClusterResult,
@@ -366,7 +370,7 @@ class NetworkEngine:
             turn_evaluations=result.iterations)
         return StepRecord(k, step.kind, values, gap=result.gap)
 
-    def _row(self, k: int, c, solved) -> dict:
+    def _row(self, k: int, c, solved, travel: tuple[float, float]) -> dict:
         image = (0, 0) if isinstance(c.j, str) else tuple(int(v) for v in c.key[2])
         stored, dissipated = _contact_energy(solved)
         return {
@@ -381,11 +385,45 @@ class NetworkEngine:
             "contact_total_area": float(c.area), "contact_stick_area": float(c.stick_area),
             "contact_spots": int(c.spots),
             "contact_slip": tuple(float(v) for v in c.slip),
+            "contact_shift_increment": tuple(float(v) for v in c.shift_increment),
+            "contact_rolling_i": travel[0], "contact_rolling_j": travel[1],
             "contact_state": c.state,
             "contact_half_space_ratio": float(c.half_space_ratio),
             "contact_mu": float(c.mu),
             "contact_elastic_energy": stored, "contact_dissipation": dissipated,
         }
+
+
+def _travel(start, end, i: int, shift0, shift1) -> tuple[float, float]:
+    """How far the contact point travelled over particle i's surface and over the other body's
+    (particle j, or the plate) in the step, m: each the distance between the pressure
+    centroid's positions in that body's own frame at the start (``start``, the contact's
+    history before the step; None for a contact new in the step: NaN) and at the end
+    (``end``), from the bodies' rigid poses (a straight line: the chord of the path over the
+    surface). The upper plate's frame moves with its horizontal shift (``shift0`` before the
+    step, ``shift1`` after, m); the lower plate's is the world's. A contact that rolls
+    without slipping travels as far over both bodies; one that slides travels over them by
+    amounts that differ by its slip."""
+    if start is None:
+        return math.nan, math.nan
+    before, after = start.solved, end.solved
+
+    def local(body, point) -> np.ndarray:
+        return body.rotation.inv().apply(np.asarray(point, dtype=float) - body.centre)
+
+    def distance(a, b) -> float:
+        return float(np.linalg.norm(np.asarray(a) - np.asarray(b)))
+
+    p0, p1 = before.pressure_centroid, after.pressure_centroid
+    if isinstance(end.key[1], str):             # a plate: (particle, plate)
+        on_particle = distance(local(after.body, p1), local(before.body, p0))
+        move = np.zeros(2)
+        if end.key[1] == "upper":
+            move = np.asarray(shift1, dtype=float) - np.asarray(shift0, dtype=float)
+        return on_particle, distance(np.asarray(p1)[:2] - move, np.asarray(p0)[:2])
+    on_a = distance(local(after.a, p1), local(before.a, p0))
+    on_b = distance(local(after.b, p1), local(before.b, p0))
+    return (on_a, on_b) if end.roles[0] == i else (on_b, on_a)
 
 
 def _contact_energy(solved) -> tuple[float, float]:

@@ -24,7 +24,7 @@ from .spec import _BEHAVIOUR_CODE, Case, Sweep
 #: what a case's scalar summary reads, besides the variables whose steps the summary keeps
 _SUMMARY_INPUTS = ("turned", "state", "quaternion", "ratio", "compression", "total_force",
                    "time_total", "tangential_force", "loaded", "fraction_stick",
-                   "fraction_roll", "fraction_rotate")
+                   "fraction_roll", "fraction_rotate", "sliding_distance", "mu_eff_sliding")
 
 
 def _summary_names() -> tuple[str, ...]:
@@ -53,11 +53,36 @@ def _total_rotation(case: _CaseData) -> tuple[float, float]:
     return sign * angle, math.degrees(math.atan2(vector[1], vector[0]))
 
 
+def _steady_friction(distance: np.ndarray, mu: np.ndarray) -> dict[str, float]:
+    """The steady state of a sliding run's effective friction: over the steps that end in the
+    last half of the sliding distance (``distance``, m: the path length at the end of each
+    step), the mean, standard deviation, smallest and largest ``mu`` (``mu_eff_sliding``, 1),
+    mean and deviation weighted by each step's increment of distance (equal steps: equal
+    weights). A run that did not slide: NaN, and a final sliding distance of 0."""
+    distance = np.nan_to_num(np.asarray(distance, dtype=float))
+    mu = np.asarray(mu, dtype=float)
+    total = float(distance[-1]) if distance.size else 0.0
+    out = {"final_sliding_distance": total, "steady_mu_eff": math.nan,
+           "steady_mu_eff_std": math.nan, "steady_mu_eff_min": math.nan,
+           "steady_mu_eff_max": math.nan}
+    weight = np.diff(distance, prepend=0.0)
+    last = (distance > 0.5 * total) & (weight > 0) & np.isfinite(mu)
+    if not total > 0 or not last.any():
+        return out
+    w, m = weight[last], mu[last]
+    mean = float(np.sum(w * m) / np.sum(w))
+    out.update(steady_mu_eff=mean,
+               steady_mu_eff_std=math.sqrt(float(np.sum(w * (m - mean) ** 2) / np.sum(w))),
+               steady_mu_eff_min=float(m.min()), steady_mu_eff_max=float(m.max()))
+    return out
+
+
 def _case_summary(case: _CaseData) -> dict:
     """Scalar summaries of one case's per-step results: the first step in which a particle
     turned, the final compression, loaded count and state fractions; the behaviour is the
     state in which the first particle to turn did (``stick`` if none did); for a case of one
-    particle also its total rotation, final state and signed final ratios."""
+    particle also its total rotation, final state and signed final ratios; for a sliding run
+    the steady-state effective friction (:func:`_steady_friction`)."""
     a = case.arrays
     out: dict[str, Any] = {v.name: v.fill if isinstance(v.fill, int | float) else math.nan
                            for v in schema.by_kind("summary")}
@@ -79,6 +104,8 @@ def _case_summary(case: _CaseData) -> dict:
         out.update(first_turn_force=float(a["total_force"][k]),
                    first_turn_compression=float(a["compression"][k]))
         first = STATES[int(a["state"][k][np.flatnonzero(turned[k])[0]])]
+    if "sliding_distance" in a and "mu_eff_sliding" in a:
+        out.update(_steady_friction(a["sliding_distance"], a["mu_eff_sliding"]))
     if turned.shape[1] == 1:
         # a case that never turned did not rotate: exactly 0, not the round-off of q q0⁻¹
         total, azimuth = _total_rotation(case) if steps.size else (0.0, math.nan)
