@@ -159,6 +159,27 @@ def test_gap_control_reproduces_force_control_and_a_free_particle_stays_put():
     assert np.abs(by_gap.translation - by_force.translation).max() < 1e-4 * delta
 
 
+def test_a_sphere_pressed_into_the_lower_plate_with_nothing_above_lifts_off():
+    """A sphere (0.8 R) 0.5 µm deep in the lower plate, its top far below the upper one, beside
+    a sphere pressed between the plates: nothing holds it down, so it rises out of the plate
+    (the Newton step's root is the kink where its only contact's force reaches zero) and ends
+    free, touching the plate or above it, where it started in x and y. (The Newton step used to
+    count that contact open at the root, N + dN = -3e-18 N, which left the sphere no
+    stiffness and so no step: 26 passes, then a convergence error. Measured: 5 passes, the
+    lift 0.5 µm to rounding.)"""
+    r_small, depth = 0.8 * R, 0.5e-6
+    bodies = [sphere(0.0, R), Body(Sphere(r_small), MAT, centre=(3 * R, 0.0, r_small - depth))]
+    result = solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=0.5, gap=2 * R - 2e-6,
+                           numerics=COARSE)
+    check_balanced(result)
+    assert result.kinematics[1] == "free"
+    assert result.contacts_of(1) == []
+    lowest = result.bodies[1].centre[2] - r_small            # the sphere's lowest point, m
+    assert -1e-15 <= lowest <= 1e-9                          # out of the plate, not beyond
+    assert np.abs(result.translation[1, :2]).max() <= 1e-12
+    assert result.iterations <= 10
+
+
 # --- c: ties and numbering -------------------------------------------------------------------
 TILT = tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), MAT, 20.0)
 
