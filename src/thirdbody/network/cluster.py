@@ -1213,6 +1213,10 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
 #: the step of a particle that no active term touches is zero (False: as the passes left it)
 _REST_UNTOUCHED = True
 
+#: a rejected trial that the trust region did not cut is not evaluated again at the quartered
+#: radius (the same poses): the radius is quartered on until it cuts the step
+_SKIP_REPEATS = True
+
 
 #: the last attempt at a step lets the models learn their error from the BEM (:func:`_learn`)
 _BROYDEN = True
@@ -1623,6 +1627,14 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
             model = None
         else:
             radius *= 0.25
+            if _SKIP_REPEATS and not learnt and not clipped:
+                # the trust region did not cut this step, so at the quartered radius the trial
+                # would be the same poses, evaluated and rejected again (the 12-sphere step
+                # above spent 14 of its passes so): quarter on to the first radius that cuts it
+                while radius >= numerics.min_radius and not _limit(
+                        problem, terms, active, ev.scale or merit_scale, full, dh_full,
+                        radius)[2]:
+                    radius *= 0.25
             if radius < numerics.min_radius:
                 break
             if learnt:
