@@ -1160,7 +1160,6 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
     _keep_plate_loaded(problem, terms, start_active)
     used = (start_active, start_laws)
     own = start_active == active and _same(start_laws, laws)
-    probed = False
     trial, trial_dh = _solve_model(problem, _model(n, terms, start_active, start_laws,
                                                           problem.correction), groups,
                                    R, plate, translate)
@@ -1177,26 +1176,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
             t *= 0.5
         else:
             if own:
-                if probed or not _PROBE:
-                    break   # not even the step's own Newton step lowers the model's merit
-                # at a kink of the piecewise model the branches at the step are not those the
-                # step enters: an open contact exactly touching (σ = 0) is open at the step
-                # and closed by any share of the trial (53 potatoes at 14 %: pair 17-20, whose
-                # spring then made the piecewise merit rise from a share of 2^-30 on, and the
-                # attempt ended on a zero step at residual 0.11); once, the branches at a
-                # vanishing share of the trial and their Newton step
-                probed = True
-                share = 2.0 ** -_MODEL_HALVINGS
-                probe_active, probe_laws = _statuses(terms, step + share * (trial - step),
-                                                     dh + share * (trial_dh - dh))
-                _keep_plate_loaded(problem, terms, probe_active)
-                if probe_active == active and _same(probe_laws, laws):
-                    break
-                used = (probe_active, probe_laws)
-                trial, trial_dh = _solve_model(problem, _model(
-                    n, terms, probe_active, probe_laws, problem.correction), groups, R, plate,
-                    translate)
-                continue
+                break       # not even the step's own Newton step lowers the model's merit
             # the start's branches (or the last pass's) lead nowhere from here: the Newton
             # step of the model at the step's own branches, a descent direction of its merit
             used, own = (active, laws), True
@@ -1228,11 +1208,6 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
             step[~touched] = 0.0
             model, active = _piecewise(problem, terms, R, plate, step, dh)[2:4]
     return step, dh, model, active
-
-
-#: when the step's own branches give no descent, the Newton step of the branches at a vanishing
-#: share of the trial is tried once (False: the passes give up there)
-_PROBE = True
 
 
 #: the step of a particle that no active term touches is zero (False: as the passes left it)
