@@ -26,6 +26,7 @@ that each case takes a second or two; tolerances are the measured errors with ab
 headroom, stated next to each assertion.
 """
 
+import itertools
 import math
 
 import numpy as np
@@ -372,9 +373,10 @@ def test_a_stalled_attempt_is_solved_again_without_the_first_phase(monkeypatch):
 def test_models_that_miss_the_bem_learn_from_it(monkeypatch):
     """Every contact model given wrong stiffnesses (normal twice, tangential half the BEM's,
     and not measured again from the solves): both attempts without learning stall (40 passes
-    between them: their trust region shrinks away), the third, whose models learn from the trials (Broyden's update of each particle's
-    block), converges to the equilibrium of the right models: the same turn within 1e-6 rad
-    and the same gap within 1 nm (measured 2.8e-8 rad and 0.09 nm)."""
+    between them: their trust region shrinks away), the third, whose models learn from the
+    trials (Broyden's update of each particle's block), converges to the equilibrium of the
+    right models: the same turn within 1e-6 rad and the same gap within 1 nm (measured
+    2.8e-8 rad and 0.09 nm)."""
     from dataclasses import replace
 
     from thirdbody.network import cluster
@@ -404,7 +406,7 @@ def test_models_that_miss_the_bem_learn_from_it(monkeypatch):
     check_balanced(result)
     assert result.iterations >= len(result.history) + 2 * 15    # two attempts failed first
     # a rejected trial that the trust region did not cut is not evaluated again unchanged
-    assert all(a != b for a, b in zip(poses, poses[1:]))
+    assert all(a != b for a, b in itertools.pairwise(poses))
     assert np.abs(result.rotation[0] - reference.rotation[0]).max() < 1e-6
     assert result.gap == pytest.approx(reference.gap, abs=1e-9)
 
