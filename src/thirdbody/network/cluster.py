@@ -1050,16 +1050,26 @@ def _approach_change(t: _Term, step: np.ndarray, dh: float) -> float:
     return float(t.row @ t.motion(step, dh))
 
 
+#: a solved contact stays closed (at zero force) when the step takes its modelled force to zero
+#: within this share of its force: the rounding of the kink at which the normal law opens
+_KINK = 1e-9
+
+
 def _statuses(terms: list[_Term], step: np.ndarray, dh: float) -> tuple[list, list]:
     """Each term's normal status (in contact after the step) and tangential branch, from the
-    predicted motion."""
+    predicted motion. A solved contact that the step unloads exactly to zero (the root of a
+    particle lifting off its only contact: N + k_n dδ = 0 to rounding, :data:`_KINK`) stays
+    closed: open, it would leave its particle without stiffness, whose minimum-norm step is
+    then no lift at all (12 spheres in an 8 mm box: a sphere pressed 0.5 µm into the lower
+    plate with nothing above, N + dN = −3 × 10⁻¹⁸ N at the root, its step zeroed pass after
+    pass)."""
     active, laws = [], []
     for t in terms:
         v = t.motion(step, dh)
         d = float(t.row @ v)
         if t.bem:
             dN = t.kn * d
-            active.append(t.N + dN > 0)
+            active.append(t.N + dN > -_KINK * t.N)
         else:
             dN = t.kn * (d - t.sigma)
             active.append(dN > 0)
@@ -1207,6 +1217,10 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
 
 #: the step of a particle that no active term touches is zero (False: as the passes left it)
 _REST_UNTOUCHED = True
+
+#: a rejected trial that the trust region did not cut is not evaluated again at the quartered
+#: radius (the same poses): the radius is quartered on until it cuts the step
+_SKIP_REPEATS = True
 
 
 #: the last attempt at a step lets the models learn their error from the BEM (:func:`_learn`)
@@ -1618,6 +1632,14 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
             model = None
         else:
             radius *= 0.25
+            if _SKIP_REPEATS and not learnt and not clipped:
+                # the trust region did not cut this step, so at the quartered radius the trial
+                # would be the same poses, evaluated and rejected again (the 12-sphere step
+                # above spent 14 of its passes so): quarter on to the first radius that cuts it
+                while radius >= numerics.min_radius and not _limit(
+                        problem, terms, active, ev.scale or merit_scale, full, dh_full,
+                        radius)[2]:
+                    radius *= 0.25
             if radius < numerics.min_radius:
                 break
             if learnt:
