@@ -184,6 +184,24 @@ def test_a_sphere_pressed_into_the_lower_plate_with_nothing_above_lifts_off(dept
     assert result.iterations <= 10
 
 
+def test_nine_pressed_spheres_under_gap_control_converge_as_one_does():
+    """Nine identical spheres, 3R apart (no pair touches), resting on the lower plate as the
+    upper one comes 4 µm into them: each is the sphere alone, pressed 2 µm at each plate
+    (symmetry: its centre at R − 2 µm) in the same Newton passes. Under gap control the plates'
+    total force is an outcome; counted as a residual, its change under the step (nine times
+    one sphere's) rejected the full Newton steps: 21 passes for nine, 7 for four, 5 for one."""
+    def run(n):
+        bodies = [sphere(3 * R * i, R, 3 * R * j) for i in range(n) for j in range(n)]
+        return solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=0.5, gap=2 * R - 4e-6,
+                             numerics=COARSE)
+
+    one, nine = run(1), run(3)
+    check_balanced(nine)
+    assert nine.iterations == one.iterations
+    for b in nine.bodies:
+        assert b.centre[2] == pytest.approx(R - 2e-6, rel=0, abs=1e-12)
+
+
 # --- c: ties and numbering -------------------------------------------------------------------
 TILT = tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), MAT, 20.0)
 
