@@ -451,6 +451,21 @@ def _force_scale(force: np.ndarray):
     return Normalize(lo, hi), None
 
 
+def _sweep_axes(summary, dims: list, x: str | None, y: str | None):
+    """A sweep map's axes: ``x`` and ``y`` (default the first two sweep dimensions, checked),
+    the other dimensions and their first six index combinations (the rows of panels)."""
+    if not dims:
+        raise ValueError("the summary has no sweep dimension")
+    x = x or dims[0]
+    y = y or (next((d for d in dims if d != x), None))
+    for name in (x, y):
+        if name is not None and name not in dims:
+            raise ValueError(f"{name!r} is not a sweep dimension; choose from {dims}")
+    rest = [d for d in dims if d not in (x, y)]
+    combos = list(itertools_product(*[range(summary.sizes[d]) for d in rest]))[:6]
+    return x, y, rest, combos
+
+
 def state_map(summary, x: str | None = None, y: str | None = None):
     """The sweep's behaviour map: per case, the behaviour (colour: stick, roll about the upper
     or lower interface, rotate, failed) with the total rotation (degrees) written in the cell
@@ -463,15 +478,7 @@ def state_map(summary, x: str | None = None, y: str | None = None):
     from matplotlib.patches import Patch
 
     dims = [d for d in summary.behaviour.dims]
-    if not dims:
-        raise ValueError("the summary has no sweep dimension")
-    x = x or dims[0]
-    y = y or (next((d for d in dims if d != x), None))
-    for name in (x, y):
-        if name is not None and name not in dims:
-            raise ValueError(f"{name!r} is not a sweep dimension; choose from {dims}")
-    rest = [d for d in dims if d not in (x, y)]
-    combos = list(itertools_product(*[range(summary.sizes[d]) for d in rest]))[:6]
+    x, y, rest, combos = _sweep_axes(summary, dims, x, y)
     meanings = summary.behaviour.attrs["flag_meanings"].split()
     cmap = ListedColormap([_BEHAVIOUR_COLOURS[m] for m in meanings])
     fig, axes = plt.subplots(len(combos), 2, figsize=(11, 4.2 * len(combos) + 0.4),
@@ -548,15 +555,7 @@ def friction_map(summary, x: str | None = None, y: str | None = None):
 
     mu = summary.steady_mu_eff
     dims = list(mu.dims)
-    if not dims:
-        raise ValueError("the summary has no sweep dimension")
-    x = x or dims[0]
-    y = y or (next((d for d in dims if d != x), None))
-    for name in (x, y):
-        if name is not None and name not in dims:
-            raise ValueError(f"{name!r} is not a sweep dimension; choose from {dims}")
-    rest = [d for d in dims if d not in (x, y)]
-    combos = list(itertools_product(*[range(summary.sizes[d]) for d in rest]))[:6]
+    x, y, rest, combos = _sweep_axes(summary, dims, x, y)
     finite = mu.values[np.isfinite(mu.values)]
     low, high = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
     if high <= low:
