@@ -10,6 +10,15 @@ solves and the wall time, or the solver's own error (a box of 2 × 2 is refused:
 meet through two images). Run:
 
     .venv/bin/python benchmarks/cluster_lattice.py --sizes 3 4 6 --spread 5e-4 --gap 2e-4
+
+With ``--steps K`` the load is a compression program instead: F_N rises in K equal steps to
+0.5 N per particle, each step started from the last one's poses, contact histories and gap (as
+a run does). Per step it prints the passes, the BEM solves per contact, the wall time and its
+shares (contact detection, BEM solves, the Newton model), and the particle contacts carrying
+load; at the end the totals. A lattice touching at ``--gap 0`` with a spread of radii is a force
+network: the larger spheres press their neighbours along oblique normals.
+
+    .venv/bin/python benchmarks/cluster_lattice.py --sizes 8 --gap 0 --spread 0.02 --steps 20
 """
 
 from __future__ import annotations
@@ -41,6 +50,44 @@ def lattice(n: int, spread: float, gap: float, seed: int = 1) -> tuple[list[Body
     return bodies, n * spacing
 
 
+def compress(n: int, spread: float, gap: float, steps: int, resolution: float) -> None:
+    """F_N in ``steps`` equal steps to 0.5 N per particle, warm started step to step."""
+    bodies, side = lattice(n, spread, gap)
+    numerics = ClusterNumerics(resolution=resolution, tol=1e-5)
+    histories, gap_start, total = {}, None, time.perf_counter()
+    shares = {"narrow": 0.0, "contacts": 0.0, "newton": 0.0}
+    passes = solves = 0
+    for k in range(1, steps + 1):
+        start = time.perf_counter()
+        try:
+            result = solve_cluster(bodies, histories, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
+                                   force=0.5 * n * n * k / steps, gap_start=gap_start,
+                                   box=(side, side), numerics=numerics)
+        except (ClusterConvergenceError, ValueError) as exc:
+            print(f"{n * n:4d} particles, step {k}: not converged after "
+                  f"{time.perf_counter() - start:.1f} s: {exc}")
+            return
+        seconds = time.perf_counter() - start
+        bodies, histories, gap_start = list(result.bodies), result.histories, result.gap
+        pairs = [c for c in result.contacts if isinstance(c.j, int) and c.normal_force > 0]
+        t = result.timings
+        for name in shares:
+            shares[name] += t.get(name, 0.0)
+        passes += result.iterations
+        solves += result.bem_solves
+        print(f"{n * n:4d} particles, step {k:2d}: F_N {0.5 * n * n * k / steps:6.2f} N, "
+              f"{result.iterations:2d} passes, "
+              f"{result.bem_solves / max(len(result.contacts), 1):4.1f} BEM solves per contact, "
+              f"{seconds:6.1f} s (detection {t.get('narrow', 0) / seconds:4.0%}, BEM "
+              f"{t.get('contacts', 0) / seconds:4.0%}, model {t.get('newton', 0) / seconds:4.0%}),"
+              f" {len(pairs)} loaded particle contacts", flush=True)
+    wall = time.perf_counter() - total
+    print(f"{n * n:4d} particles: {steps} steps in {wall:.0f} s ({wall / steps:.1f} s/step), "
+          f"{passes / steps:.1f} passes/step, {solves} BEM solves; detection "
+          f"{shares['narrow'] / wall:.0%}, BEM {shares['contacts'] / wall:.0%}, model "
+          f"{shares['newton'] / wall:.0%}")
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--sizes", type=int, nargs="+", default=[3, 4, 6])
@@ -48,8 +95,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--gap", type=float, default=2e-4,
                         help="lattice gap / 2R (below 0: pressed in; write --gap=-1e-3)")
     parser.add_argument("--resolution", type=float, default=20.0)
+    parser.add_argument("--steps", type=int, default=0,
+                        help="a compression program of this many force steps (0: one solve)")
     args = parser.parse_args(argv)
     for n in args.sizes:
+        if args.steps:
+            compress(n, args.spread, args.gap, args.steps, args.resolution)
+            continue
         bodies, side = lattice(n, args.spread, args.gap)
         start = time.perf_counter()
         try:

@@ -775,3 +775,24 @@ def test_a_pressed_square_monolayer_rolls_and_its_pairs_rub(mu_pp):
     hertz = 4 / 3 * E_STAR_PAIR * math.sqrt(R / 2) * (2 * R * 1e-3) ** 1.5
     assert mu_eff == pytest.approx(mu_pp * hertz / load, abs=0.08 * mu_pp * hertz / load + 1e-6)
     assert np.allclose(slid.rotation[:, 1], ds / (2 * R), rtol=0.01, atol=0)
+
+
+def test_the_newton_solve_is_the_truncated_pseudo_inverse_with_or_without_the_lu_path():
+    """The LU shortcut of the Newton model's solve (``_least_norm``) gives numpy's least-squares
+    solution on a well-conditioned matrix, and on a matrix with a mode of next to no stiffness
+    (as a free particle's spin) it falls back to the truncated minimum-norm solution, the
+    free mode left alone (checked against ``np.linalg.pinv``, not the code under test)."""
+    from thirdbody.network import cluster
+
+    rng = np.random.default_rng(3)
+    J = rng.normal(size=(24, 24)) + 6 * np.eye(24)
+    B = rng.normal(size=24)
+    reference = np.linalg.lstsq(J, B, rcond=None)[0]
+    assert np.allclose(cluster._least_norm(J, B), reference, rtol=0, atol=1e-12)
+    assert np.allclose(cluster._least_norm(J, np.c_[B, 2 * B]), np.c_[reference, 2 * reference],
+                       rtol=0, atol=1e-12)
+    J[:, 5] *= 1e-12                   # a mode of next to no stiffness, coupled to nothing
+    J[5, :] *= 1e-12
+    X = cluster._least_norm(J, B)
+    assert abs(X[5]) < 1e-12 * np.abs(X).max()
+    assert np.allclose(X, np.linalg.pinv(J, rcond=1e-9) @ B, rtol=0, atol=1e-12)
