@@ -796,3 +796,21 @@ def test_the_newton_solve_is_the_truncated_pseudo_inverse_with_or_without_the_lu
     X = cluster._least_norm(J, B)
     assert abs(X[5]) < 1e-12 * np.abs(X).max()
     assert np.allclose(X, np.linalg.pinv(J, rcond=1e-9) @ B, rtol=0, atol=1e-12)
+
+
+def test_a_convergence_error_names_a_contact_past_the_half_space_limit():
+    """The end of a convergence error: the contact with the largest a/R when it is past the
+    limit (the step is out of the contact model's range), nothing otherwise."""
+    from types import SimpleNamespace as NS
+
+    from thirdbody.network import HALF_SPACE_LIMIT, cluster
+
+    def ev(*ratios):
+        return NS(contacts=[NS(key=(k, "lower"), contact=NS(half_space_ratio=r))
+                            for k, r in enumerate(ratios)])
+
+    problem = NS(numerics=NS(half_space_limit=HALF_SPACE_LIMIT), user_key=lambda key: key)
+    assert cluster._beyond_half_space(problem, ev(0.05, 0.09)) == ""
+    assert cluster._beyond_half_space(problem, ev(0.0, HALF_SPACE_LIMIT)) == ""
+    text = cluster._beyond_half_space(problem, ev(0.05, 0.42, 0.2))
+    assert "(1, 'lower')" in text and "a/R = 0.42" in text and "half-space" in text

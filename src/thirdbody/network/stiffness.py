@@ -92,6 +92,10 @@ class TangentialLaw:
     state: str
 
 
+#: the tangential laws whose blocks a contact model keeps (:meth:`ContactModel.law_blocks`)
+_LAW_CACHE = 64
+
+
 @dataclass(frozen=True)
 class ContactModel:
     """A contact's wrench and its model, from its last BEM solve (module docstring).
@@ -388,15 +392,28 @@ class ContactModel:
     def law_blocks(self, law: TangentialLaw) -> tuple[np.ndarray, np.ndarray, np.ndarray,
                                                       np.ndarray]:
         """The (6, 12) blocks of a tangential law's dT and the (6,) wrenches of its offset, on a
-        and on b."""
+        and on b (not to be modified: a law met again, as a stick branch is at every pass of a
+        Newton step's active set, returns the arrays computed the first time)."""
+        key = (law.stiffness.tobytes(), law.g.tobytes(), law.offset.tobytes())
+        cache = self._law_cache
+        hit = cache.get(key)
+        if hit is not None:
+            return hit
         ra, rb = self.arms
         dT = law.stiffness @ self.tangential_rows() + \
             np.outer(law.g, self.k_normal * self.approach_row())
         on_a = np.vstack([dT, skew(ra) @ dT])
         on_b = -np.vstack([dT, skew(rb) @ dT])
         c = law.offset
-        return (on_a, on_b, np.concatenate([c, cross(ra, c)]),
-                -np.concatenate([c, cross(rb, c)]))
+        out = (on_a, on_b, np.concatenate([c, cross(ra, c)]), -np.concatenate([c, cross(rb, c)]))
+        if len(cache) < _LAW_CACHE:
+            cache[key] = out
+        return out
+
+    @cached_property
+    def _law_cache(self) -> dict:
+        """:meth:`law_blocks` by the law's bytes (at most :data:`_LAW_CACHE` laws)."""
+        return {}
 
     def blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """The tangent blocks at a zero step (the law's branch at an infinitesimal loading
