@@ -335,8 +335,7 @@ class ContactModel:
     def tangential_law(self, ds: np.ndarray, dN: float) -> TangentialLaw:
         """The branch of the tangential law at the predicted tangential displacement ``ds``
         (3,) and normal force change ``dN``, linearised there (module docstring)."""
-        n = self.normal
-        P = _I - np.outer(n, n)
+        P = self._projector
         T = self.tangential_force
         zero = np.zeros(3)
         if self.mu <= 0 or self.k_stick <= 0:
@@ -370,11 +369,16 @@ class ContactModel:
         """The stick branch of a sliding contact's law (where a Newton step starts it): the
         elastic predictor from the start of the step, T + k₀ (ds + s_slip) (module
         docstring); for a contact with stick cells, from its current force, T + k₀ ds."""
-        n = self.normal
-        P = _I - np.outer(n, n)
+        P = self._projector
         zero = np.zeros(3)
         back = self.slipped if self.sliding and self.slipped is not None else zero
         return TangentialLaw(self.k_stick * P, zero, self.k_stick * back, "stick")
+
+    @cached_property
+    def _projector(self) -> np.ndarray:
+        """I − n nᵀ (3, 3): onto the tangent plane (computed once per model, not to be
+        modified)."""
+        return _I - np.outer(self.normal, self.normal)
 
     def _stick_normal(self) -> np.ndarray:
         """dT/dN at a fixed shift of a contact in partial slip (3,): Cattaneo-Mindlin's
