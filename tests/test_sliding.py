@@ -800,3 +800,43 @@ def test_the_bundled_shear_example_is_a_slide_out_and_back():
     assert isinstance(load, tb.Slide) and load.force == 1.0
     assert load.path == [(20e-6, 0.0), (0.0, 0.0), (-20e-6, 0.0), (0.0, 0.0)]
     assert (plates.mu_up, plates.mu_low) == (0.6, 0.3) and numerics["mu_pp"] == 0.3
+
+
+@pytest.mark.slow
+def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
+    """The `make shear` example (shear_layer.toml: 8 flat ellipsoids in a periodic box, 80 N),
+    its compression and first two sliding steps of 5 µm: every particle is pressed, every
+    contact sticks (the ellipsoids tilt, rolling without slip: `stick` and `turned`), the layer
+    resists (μ_eff > 0) and opens the gap. Rolling without slip, the plates do no net work
+    but what the contacts store: per step mean(μ_eff) Δs = Δh + ΔE/F_N, from the dataset's
+    own forces and gaps (measured 2.0 % above Δh + ΔE/F_N; tolerance 10 %); the energy
+    residual stays within 1 % of F_N (|Δs| + |Δh|). About 12 s."""
+    from importlib import resources
+
+    from thirdbody.io import load_config
+
+    body, plates, load, numerics = load_config(
+        resources.files("thirdbody") / "examples" / "shear_layer.toml").build()
+    increment = load.path[0][0] / load.steps            # the example's first steps, m
+    short = tb.Slide(force=load.force, points=[(2 * increment, 0.0)], steps=2,
+                     compress_steps=load.compress_steps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        sim = tb.Simulation(body, plates, short, **numerics)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    n = ds.sizes["particle"]
+    slid = slice(load.compress_steps, None)
+    assert (ds.loaded.values[slid] == n).all()
+    assert (ds.contact_state.values[ds.contact_step.values >= load.compress_steps]
+            == tb.schema.CONTACT_STATES.index("stick")).all()
+    assert (ds.state.values[slid] == tb.schema.STATES.index("stick")).all()
+    assert ds.turned.values[slid].all()
+    mu = ds.mu_eff_sliding.values
+    assert (mu[slid] > 0).all() and (ds.dilatancy.values[slid] > 0).all()
+    k = len(mu) - 1                                     # the second sliding step
+    ds_step = float(ds.sliding_distance[k] - ds.sliding_distance[k - 1])
+    dh = float(ds.plate_gap[k] - ds.plate_gap[k - 1])
+    stored = float(ds.elastic_energy[k] - ds.elastic_energy[k - 1]) / load.force
+    assert 0.5 * (mu[k] + mu[k - 1]) * ds_step == pytest.approx(dh + stored, rel=0.1)
+    assert np.abs(ds.energy_residual.values[slid]).max() < 0.01
