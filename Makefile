@@ -2,6 +2,7 @@
 #               `make test`  (sets up .venv, runs ruff, builds the docs strictly, runs the whole test suite)
 # More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
 #               `make layer` (30 potatoes between the plates), `make layer-hertz`,
+#               `make shear` (a periodic layer of 8 ellipsoids compressed, then slid 1.5 mm),
 #               `make sweep` (a 20-case sweep on a local dask cluster),
 #               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`,
 #               `make bench-layer`,
@@ -12,7 +13,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 OUT    ?= out
 
-.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz sweep test test-all test-fast lint docs bench \
+.PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz shear sweep test test-all test-fast lint docs bench \
 	bench-tangential bench-simulation bench-sweep bench-layer mutation clean venv
 
 $(BIN)/activate:
@@ -51,6 +52,11 @@ fig2: $(VENV)/.installed-test
 layer: $(VENV)/.installed-test
 	$(BIN)/thirdbody run src/thirdbody/examples/layer_polydisperse.toml -o $(OUT)/layer
 	$(BIN)/thirdbody export-vtk $(OUT)/layer/results.nc $(OUT)/layer/vtk
+
+# a shear test (docs/guide/sliding.md): results.nc and the figures (shear.png: mu_eff, dilatancy
+# and the energy against the sliding distance; layer_top_view.png) in out/shear
+shear: $(VENV)/.installed-test
+	$(BIN)/thirdbody run src/thirdbody/examples/shear_layer.toml -o $(OUT)/shear
 
 layer-hertz: $(VENV)/.installed-test
 	$(BIN)/python examples/layer_hertz_check.py --out $(OUT)/layer_hertz

@@ -589,3 +589,35 @@ def test_a_file_written_before_network_runs_reads_with_their_variables(tmp_path)
     for name in new:
         assert np.array_equal(back[name].values, ds[name].values, equal_nan=True), name
     assert np.array_equal(back.normal_force.values, F)
+
+
+# --- what a particle did: rolling means turning ------------------------------------------------
+@pytest.mark.parametrize("kinematics, turned, plates, touches, expected", [
+    # touching only the plates: the paper's states when it turns, sliding ones when it does not
+    ("roll", True, {"upper": "stick", "lower": "slide"}, False, "roll_upper"),
+    ("roll", False, {"upper": "stick", "lower": "slide"}, False, "slide_lower"),
+    ("roll", True, {"upper": "slide", "lower": "stick"}, False, "roll_lower"),
+    ("roll", False, {"upper": "slide", "lower": "stick"}, False, "slide_upper"),
+    ("slide", True, {"upper": "slide", "lower": "slide"}, False, "rotate"),
+    ("slide", False, {"upper": "slide", "lower": "slide"}, False, "slide"),
+    # no contact slides: it sticks, turned or not (rolling without slip)
+    ("roll", True, {"upper": "stick", "lower": "stick"}, False, "stick"),
+    ("stick", False, {"upper": "stick", "lower": "stick"}, False, "stick"),
+    ("free", False, {}, False, "unloaded"),
+    # touching particles: roll only when it turns
+    ("roll", True, {"upper": "stick", "lower": "slide"}, True, "roll"),
+    ("roll", False, {"upper": "stick", "lower": "slide"}, True, "slide"),
+    ("slide", False, {"lower": "slide"}, True, "slide"),
+    ("slide", True, {"lower": "slide"}, True, "rotate"),
+])
+def test_a_particle_rolls_only_when_it_turns(kinematics, turned, plates, touches, expected):
+    """The state from the contacts' states and whether the particle turned, per the
+    definitions (docs/reference/variables.md): a particle stuck to the upper plate and sliding
+    on the lower one without turning is carried along, "slide_lower", not "roll_upper"."""
+    from thirdbody.network.run import particle_state
+
+    contacts = list(plates.values()) + (["slide" if kinematics == "slide" else "stick"]
+                                        if touches else [])
+    state = particle_state(kinematics, turned, contacts, plates, touches)
+    assert state == expected
+    assert state in tb.schema.STATES

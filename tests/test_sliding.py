@@ -382,13 +382,39 @@ def test_a_flat_ellipsoid_cannot_roll_and_slides_on_the_plate_with_the_smaller_m
 
 def test_a_flat_ellipsoid_slides_on_the_upper_plate_when_its_mu_is_the_smaller():
     """The plates' μ swapped (μ_up 0.3 < μ_low 0.6): once sliding, μ_eff = μ_up and the
-    particle stays on the lower plate (it moves by less than 1 % of Δs per step)."""
+    particle stays on the lower plate (it moves by less than 1 % of Δs per step) without
+    turning: it slides on the upper plate, "slide_upper", not "roll_lower"."""
     load = tb.Slide(force=F, distance=4 * FLAT_STEP, steps=4, compress_steps=1)
     ds = run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_LOW, MU_UP), load)
     settled = slice(3, 5)
     assert ds.mu_eff_sliding.values[settled] == pytest.approx(MU_LOW, rel=1e-4)
     move = sliding(ds, "translation").values[settled]
     assert np.abs(move[:, 0]).max() < 0.01 * FLAT_STEP
+    names = ds.state.attrs["flag_meanings"].split()
+    assert [names[int(v)] for v in sliding(ds, "state").values[settled]] == ["slide_upper"] * 2
+
+
+def test_a_particle_carried_by_one_plate_without_turning_slides_it_does_not_roll(flat_run):
+    """Rolling means turning. Once the flat ellipsoid slides (the last two steps) it moves with
+    the upper plate, Δs a step (5 µm), and turns by nothing (below 10⁻³ of Δs/h): its upper
+    contact sticks, the lower slides, and it is "slide_lower" (sliding on the lower plate),
+    not "roll_upper", and not ``turned``. In the step before, it tilts by 0.22° about the
+    sticking upper contact while the lower one slides: that is "roll_upper"."""
+    ds = flat_run
+    names = ds.state.attrs["flag_meanings"].split()
+    state = [names[int(v)] for v in sliding(ds, "state").values]
+    h = ds.plate_gap.values[-1]
+    move = sliding(ds, "translation").values
+    turn = np.radians(sliding(ds, "rotation_angle").values)
+    for k in (3, 4):                                # carried by the upper plate, not turning
+        assert move[k, 0] == pytest.approx(FLAT_STEP, rel=1e-3)
+        assert turn[k] < 1e-3 * FLAT_STEP / h
+        assert state[k] == "slide_lower"
+        assert not sliding(ds, "turned").values[k]
+    assert turn[2] > 0.1 * FLAT_STEP / h             # it tilts about the upper contact
+    assert state[2] == "roll_upper"
+    assert ds.fraction_slide.values[3:].tolist() == [1.0, 1.0]
+    assert ds.fraction_roll.values[2] == 1.0
 
 
 # --- g: the figure -----------------------------------------------------------------------------
@@ -774,3 +800,43 @@ def test_the_bundled_shear_example_is_a_slide_out_and_back():
     assert isinstance(load, tb.Slide) and load.force == 1.0
     assert load.path == [(20e-6, 0.0), (0.0, 0.0), (-20e-6, 0.0), (0.0, 0.0)]
     assert (plates.mu_up, plates.mu_low) == (0.6, 0.3) and numerics["mu_pp"] == 0.3
+
+
+@pytest.mark.slow
+def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
+    """The `make shear` example (shear_layer.toml: 8 flat ellipsoids in a periodic box, 80 N),
+    its compression and first two sliding steps of 5 µm: every particle is pressed, every
+    contact sticks (the ellipsoids tilt, rolling without slip: `stick` and `turned`), the layer
+    resists (μ_eff > 0) and opens the gap. Rolling without slip, the plates do no net work
+    but what the contacts store: per step mean(μ_eff) Δs = Δh + ΔE/F_N, from the dataset's
+    own forces and gaps (measured 2.0 % above Δh + ΔE/F_N; tolerance 10 %); the energy
+    residual stays within 1 % of F_N (|Δs| + |Δh|). About 12 s."""
+    from importlib import resources
+
+    from thirdbody.io import load_config
+
+    body, plates, load, numerics = load_config(
+        resources.files("thirdbody") / "examples" / "shear_layer.toml").build()
+    increment = load.path[0][0] / load.steps            # the example's first steps, m
+    short = tb.Slide(force=load.force, points=[(2 * increment, 0.0)], steps=2,
+                     compress_steps=load.compress_steps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        sim = tb.Simulation(body, plates, short, **numerics)
+        ds = sim.run()
+    assert sim.status == "complete", sim.status
+    n = ds.sizes["particle"]
+    slid = slice(load.compress_steps, None)
+    assert (ds.loaded.values[slid] == n).all()
+    assert (ds.contact_state.values[ds.contact_step.values >= load.compress_steps]
+            == tb.schema.CONTACT_STATES.index("stick")).all()
+    assert (ds.state.values[slid] == tb.schema.STATES.index("stick")).all()
+    assert ds.turned.values[slid].all()
+    mu = ds.mu_eff_sliding.values
+    assert (mu[slid] > 0).all() and (ds.dilatancy.values[slid] > 0).all()
+    k = len(mu) - 1                                     # the second sliding step
+    ds_step = float(ds.sliding_distance[k] - ds.sliding_distance[k - 1])
+    dh = float(ds.plate_gap[k] - ds.plate_gap[k - 1])
+    stored = float(ds.elastic_energy[k] - ds.elastic_energy[k - 1]) / load.force
+    assert 0.5 * (mu[k] + mu[k - 1]) * ds_step == pytest.approx(dh + stored, rel=0.1)
+    assert np.abs(ds.energy_residual.values[slid]).max() < 0.01

@@ -21,7 +21,7 @@ from . import schema
 from ._version import __version__
 from .particle.interface import surface_approach
 from .rigid import RigidState
-from .schema import INTERFACES, STATES
+from .schema import INTERFACES, SLIDING, STATES
 
 #: the states that count as rolling (``fraction_roll``)
 ROLLING = ("roll_upper", "roll_lower", "roll")
@@ -252,7 +252,7 @@ class LayerRecord(_Values):
             fraction_stick=sum(r.state == "stick" for r in loaded) / n,
             fraction_roll=sum(r.state in ROLLING for r in loaded) / n,
             fraction_rotate=sum(r.state == "rotate" for r in loaded) / n,
-            fraction_slide=sum(r.state == "slide" for r in loaded) / n,
+            fraction_slide=sum(r.state in SLIDING for r in loaded) / n,
             plate_force=(float(fx), float(fy)), plate_moment=(float(mx), float(my)),
             share_error=share_error, time_total=time_total)
         for var in schema.by_kind("step"):          # the network's, for this model: blank

@@ -25,16 +25,20 @@ from typing import Any
 import numpy as np
 
 __all__ = ["BEHAVIOURS", "COMPONENTS", "CONTACT_STATES", "DIMENSIONS", "EVENTS",
-           "FORMAT_VERSION", "INTERFACES", "PARAMETERS", "STATES", "VARIABLES", "XYZ", "Dimension",
-           "Variable", "by_kind", "markdown_table", "parameter_units", "variable"]
+           "FORMAT_VERSION", "INTERFACES", "PARAMETERS", "SLIDING", "STATES", "VARIABLES", "XYZ",
+           "Dimension", "Variable", "by_kind", "markdown_table", "parameter_units", "variable"]
 
 #: the results file layout this version writes (``thirdbody_format`` attribute); version 1 (no
 #: attribute) had no ``particle`` dimension for a single particle and maps on metres for one
 #: particle but on cell indices for a layer. :func:`thirdbody.io.results.open_results` reads both.
 FORMAT_VERSION = 2
 
-#: what a particle did in a step (``state``), in code order
-STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded", "roll", "slide")
+#: what a particle did in a step (``state``), in code order; "roll…" and "rotate" turn,
+#: "slide…" do not (network runs: :func:`thirdbody.network.run.particle_state`)
+STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded", "roll", "slide",
+          "slide_upper", "slide_lower")
+#: the states of a particle that slid without turning (``fraction_slide``)
+SLIDING = ("slide", "slide_upper", "slide_lower")
 #: what the event table records (``event_kind``)
 EVENTS = ("loaded", "unloaded", "roll_upper", "roll_lower", "rotate", "rolled_off")
 #: a sweep case's behaviour over its run (``behaviour``), in code order
@@ -221,8 +225,9 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("plate_moment", "step component", "N m",
        "tilting moment of the particles' forces on the upper plate, about the origin on the "
        "lower plate"),
-    _v("fraction_slide", "step", "1", "network runs: fraction of the loaded particles whose "
-                                      "contacts all slid", summary=True),
+    _v("fraction_slide", "step", "1", "network runs: fraction of the loaded particles that "
+                                      "slid without turning (slide, slide_upper, "
+                                      "slide_lower)", summary=True),
     _v("particle_contacts", "step", "1", "network runs: number of particle-particle contacts "
                                          "carrying load", dtype="int64", fill=0, summary=True),
     _v("coordination", "step", "1",
@@ -291,7 +296,8 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("rotation", _PC, "degree", "rotation vector of the turn in this step (horizontal "
                                   "components)"),
     _v("rotation_angle", _P, "degree", "angle turned in this step"),
-    _v("state", _P, "1", "what the particle did in the step", dtype="int8", fill="unloaded",
+    _v("state", _P, "1", "what the particle did in the step (roll... and rotate turned, "
+                          "slide... did not)", dtype="int8", fill="unloaded",
        flags=STATES, summary=True),
     _v("turned", _P, "1", "the particle turned in this step", dtype="int8", fill=False),
     _v("balanced", _P, "1", "the turn ended at a balance of the couple, not inside the "

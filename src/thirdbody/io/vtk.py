@@ -76,7 +76,8 @@ the painted pressure is an overview; the contact patches show the maps as they a
 
 Point data in every step: ``state`` (int8), the particle's state code in the step, as in the
 results' ``state`` variable (its ``flag_meanings`` attribute names the codes: stick,
-roll_upper, roll_lower, rotate, failed, unloaded).
+roll_upper, roll_lower, rotate, failed, unloaded, and for network runs roll, slide,
+slide_upper, slide_lower).
 
 Cell data: ``particle`` (the particle's index in the layer) and ``state`` (as above).
 

@@ -22,13 +22,15 @@ upper one at z = h. Horizontal positions in the records are the layer's (``x0``,
 placed, ``position`` the centroid's displacement since, not wrapped into a periodic box);
 ``contact_point`` is on particle i's side of the box in the layer's coordinates.
 
-What a particle did (``state``): "unloaded" when it touches nothing; "stick" when every contact
-has stick cells (it may still turn a little: a tilted particle pressed between two stuck
-contacts turns as the plates approach, about dh sin φ / |AB| for contacts A and B whose line
-leans φ from the vertical; the paper's model holds it fixed); "roll_upper" / "roll_lower"
-when it touches only the plates and rolls about the one whose contact sticks while the other
-slides, "rotate" when both of them slide (the paper's states, eqs 4-5); "roll" (some contacts
-stick, others slide) and "slide" (every contact slides) for a particle touching particles.
+What a particle did (``state``, :func:`particle_state`): "unloaded" when it touches nothing;
+"stick" when every contact has stick cells (it may still turn a little: a tilted particle
+pressed between two stuck contacts turns as the plates approach, about dh sin φ / |AB| for
+contacts A and B whose line leans φ from the vertical; the paper's model holds it fixed).
+Rolling means turning (by more than ``stick_rotation`` in the step): "roll_upper" /
+"roll_lower" when it touches only the plates and turns about the one whose contact sticks
+while the other slides, "slide_lower" / "slide_upper" when it does so without turning (carried
+by one plate, sliding on the other), "rotate" / "slide" when every contact slides and it turns
+/ does not; "roll" / "slide" for the other particles with sticking and sliding contacts.
 """
 
 from __future__ import annotations
@@ -46,7 +48,7 @@ from ..records import LayerRecord, StepRecord, _particle_names, _pose, _turn
 from .body import Body
 from .cluster import ClusterNumerics, ClusterResult, solve_cluster, wrap
 
-__all__ = ["NetworkEngine", "NetworkState"]
+__all__ = ["NetworkEngine", "NetworkState", "particle_state"]
 
 #: ``contact_j`` of a plate contact
 PLATE_INDEX = {"lower": -1, "upper": -2}
@@ -285,7 +287,7 @@ class NetworkEngine:
             fraction_stick=states.count("stick") / m,
             fraction_roll=sum(s in ("roll_upper", "roll_lower", "roll") for s in states) / m,
             fraction_rotate=states.count("rotate") / m,
-            fraction_slide=states.count("slide") / m,
+            fraction_slide=sum(s in schema.SLIDING for s in states) / m,
             particle_contacts=len(pairs),
             coordination=(math.fsum(degree[i] for i in loaded) / len(loaded)
                           if loaded else math.nan),
@@ -319,27 +321,12 @@ class NetworkEngine:
         sides = ("upper", "lower")
         mu = {"upper": self.plates.mu_up, "lower": self.plates.mu_low}
         others = [c for c in mine if not isinstance(c.j, str)]
-        state = {"free": "unloaded", "stick": "stick"}.get(kind)
-        if state is None and all(c.state == "stick" for c in mine):
-            # no contact slides: it sticks, whatever it turned (a tilted particle turns a
-            # little as the plates approach its two stuck contacts, ``rotation_angle``)
-            state = "stick"
-        if state is None:
-            up, low = plate.get("upper"), plate.get("lower")
-            if others or up is None or low is None:
-                state = "roll" if kind == "roll" else "slide"
-            elif kind == "slide":
-                state = "rotate"
-            elif up.state == "stick" and low.state == "slide":
-                state = "roll_upper"
-            elif low.state == "stick" and up.state == "slide":
-                state = "roll_lower"
-            else:
-                state = "roll"
+        turned = bool(np.linalg.norm(result.rotation[i]) > self.numerics.stick_rotation)
+        state = particle_state(kind, turned, [c.state for c in mine],
+                               {s: c.state for s, c in plate.items()}, bool(others))
         turn = _turn(body.rotation, start)
         values.update(**_pose(body.rotation), **turn, state=state,
-                      turned=bool(np.linalg.norm(result.rotation[i])
-                                  > self.numerics.stick_rotation),
+                      turned=turned,
                       position=(float(displacement[0]), float(displacement[1])),
                       centroid_height=float(body.centre[2]),
                       translation=tuple(float(v) for v in result.translation[i]))
@@ -392,6 +379,43 @@ class NetworkEngine:
             "contact_mu": float(c.mu),
             "contact_elastic_energy": stored, "contact_dissipation": dissipated,
         }
+
+
+def particle_state(kinematics: str, turned: bool, contact_states: list[str],
+                   plate_states: dict[str, str], touches_particles: bool) -> str:
+    """What a particle of a network run did in a step (``state``, :data:`thirdbody.schema.STATES`).
+
+    ``kinematics`` is the cluster's word for it (:attr:`ClusterResult.kinematics`: "free",
+    "stick", "roll", "slide"); ``turned`` whether it turned by more than ``stick_rotation`` in
+    the step; ``contact_states`` the state ("stick" or "slide") of each of its loaded
+    contacts; ``plate_states`` those of its plate contacts by side ("upper", "lower");
+    ``touches_particles`` whether any loaded contact is with another particle.
+
+    Rolling means turning. "unloaded": it touches nothing; "stick": no contact slides
+    (whatever it turned: a tilted particle pressed between two stuck contacts turns a little
+    as the plates approach). Every contact sliding: "rotate" if it turns, else "slide". A
+    particle touching only the two plates, one contact sticking and the other sliding:
+    "roll_upper" / "roll_lower" when it turns about the sticking one (the paper's states,
+    eqs 4-5), "slide_lower" / "slide_upper" when it does not turn: carried by the plate whose
+    contact sticks, it slides on the other one (named by where it slides: "slide_lower"
+    sticks to the upper plate and slides on the lower). Any other particle with contacts that
+    stick and contacts that slide (touching particles, or one plate): "roll" when it turns,
+    "slide" when it does not.
+    """
+    if kinematics == "free":
+        return "unloaded"
+    if kinematics == "stick" or all(c == "stick" for c in contact_states):
+        return "stick"
+    if kinematics == "slide":                       # every contact slides
+        return "rotate" if turned else "slide"
+    up, low = plate_states.get("upper"), plate_states.get("lower")
+    if touches_particles or up is None or low is None:
+        return "roll" if turned else "slide"
+    if up == "stick" and low == "slide":
+        return "roll_upper" if turned else "slide_lower"
+    if low == "stick" and up == "slide":
+        return "roll_lower" if turned else "slide_upper"
+    return "roll" if turned else "slide"
 
 
 def _travel(start, end, i: int, shift0, shift1) -> tuple[float, float]:
