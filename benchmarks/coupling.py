@@ -26,6 +26,11 @@ recomputed here from the fields: the normal complementarity of the coupled gap
 g + K_zz p + K_zt τ − δ, and |ΣτΔA − Q|/Q.
 
     python benchmarks/coupling.py [--sizes 128 256] [--cases ...] [--out benchmarks/results]
+
+``--compare-start``: the ``normal`` step only, started from the previous step stretched (what
+:func:`solve_coupled` does under a growing normal load with no tangential load) against the
+coarse passes (that predictor switched off), alternating in one process, CPU time
+(``time.process_time``), best of 3, each over the floor.
 """
 
 from __future__ import annotations
@@ -47,6 +52,7 @@ import thirdbody as tb  # noqa: E402
 from normal_contact import E_YOUNG, NU, make_problem  # noqa: E402
 from thirdbody.bem import (  # noqa: E402
     ElasticPair,
+    coupled,
     coupling_operator,
     normal_operator,
     solve_coupled,
@@ -117,14 +123,58 @@ def _best(fn, *args):
     return best, out
 
 
+def _cpu_best(fn, *args):
+    best, out = np.inf, None
+    for _ in range(REPEAT):
+        t0 = time.process_time()
+        out = fn(*args)
+        best = min(best, time.process_time() - t0)
+    return best, out
+
+
+def _compare_start(cases, sizes, mat) -> None:
+    """The ``normal`` step from the stretched previous step against the coarse start."""
+    stretched = coupled._normal_growth
+    print("| case | N | floor s | coarse start / floor (passes) | stretched / floor (passes) "
+          "| max Δp / max p |\n|---|---|---|---|---|---|")
+    for case in cases:
+        for n in sizes:
+            prob = _problem(case, n)
+            grid = tb.Grid(n, prob["h"])
+            gap = prob["gap"]
+            coupled._normal_growth = lambda *args: False
+            first = _coupled(gap, grid, mat, 0.9, 0.0, None)
+            best, out = {False: np.inf, True: np.inf}, {}
+            for _ in range(REPEAT):
+                for on in (False, True):
+                    coupled._normal_growth = stretched if on else (lambda *args: False)
+                    t0 = time.process_time()
+                    out[on] = _coupled(gap, grid, mat, 1.0, 0.0, first)
+                    best[on] = min(best[on], time.process_time() - t0)
+            coupled._normal_growth = stretched
+            t_n, _ = _cpu_best(_normal_half, gap, grid, mat, 1.0, first, out[False])
+            t_t, _ = _cpu_best(_tangential_half, 0.0, first, out[False])
+            floor = t_n + t_t
+            p = out[False].normal.pressure
+            dp = np.abs(out[True].normal.pressure - p).max() / p.max()
+            print(f"| {case} | {n} | {floor:.3f} | {best[False] / floor:.2f} "
+                  f"({out[False].coupling_passes}) | {best[True] / floor:.2f} "
+                  f"({out[True].coupling_passes}) | {dp:.1e} |", flush=True)
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[128, 256])
     ap.add_argument("--cases", nargs="+", default=["circle", "ellipse10", "two_spots", "rough",
                                                    "ellipse10_30deg", "filling"])
     ap.add_argument("--out", type=Path, default=None, help="write coupling.md here")
+    ap.add_argument("--compare-start", action="store_true",
+                    help="the normal step: stretched previous step against the coarse start")
     args = ap.parse_args(argv)
     mat = tb.Material(E_YOUNG, NU)
+    if args.compare_start:
+        _compare_start(args.cases, args.sizes, mat)
+        return 0
     pair = ElasticPair.rigid_plate(mat)
     rows = []
     head = ("| case | N | step | uncoupled s | coupled s | ratio | floor | coupled / floor "

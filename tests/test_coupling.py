@@ -568,3 +568,64 @@ def test_a_box_that_cannot_grow_hands_the_step_to_the_whole_window(monkeypatch):
                           _crop=False)
     np.testing.assert_array_equal(step.normal.pressure, whole.normal.pressure)
     np.testing.assert_array_equal(step.traction, whole.traction)
+
+
+def test_spence_stages_start_from_the_last_stage_stretched():
+    """The predictor of a growing normal load with no tangential load (Spence's problem is
+    self-similar): each contact patch of the previous step stretched by s about its own pressure
+    centroid, fields times s. Two Hertz patches (a₀ = 6 and 4 cells, p₀ ∝ a₀) with a radial
+    shear τ = 0.2 p (r/a₀) stretched by s = 1.1 equal the same fields at a = s a₀ (computed here
+    from the formula) within the bilinear interpolation's error; the slip ring moves out with
+    them. The predictor is used only for such steps."""
+    from dataclasses import replace
+
+    from thirdbody.bem.coupled import _normal_growth, _stretched
+
+    mat, grid, gap = _sphere(48, 0.3, 1.0)
+    base = solve_coupled(gap, grid, mat, 0.3, force=1.0, tangential_force=(0.0, 0.0))
+    iy, ix = np.mgrid[0:48, 0:48].astype(float)
+    centres, radii = ((14.3, 15.6), (33.2, 31.7)), (6.0, 4.0)
+
+    def fields(scale: float):
+        p, tau, slip = np.zeros((48, 48)), np.zeros((2, 48, 48)), np.zeros((48, 48), bool)
+        for (cy, cx), a0 in zip(centres, radii, strict=True):
+            a = scale * a0
+            r = np.hypot(iy - cy, ix - cx)
+            inside = r < a
+            pk = a0 * scale * np.sqrt(np.clip(1 - (r / a) ** 2, 0, None))
+            p += np.where(inside, pk, 0.0)
+            for k, d in enumerate((iy - cy, ix - cx)[::-1]):
+                tau[k] += np.where(inside, 0.2 * pk * d / a, 0.0)
+            slip |= inside & (r > 0.6 * a)
+        return p, tau, slip
+
+    p0, tau0, slip0 = fields(1.0)
+    normal = replace(base.normal, pressure=p0, contact=p0 > 0)
+    previous = replace(base, normal=normal, traction=tau0, slip=slip0)
+    s = 1.1
+    p, tau, slip = _stretched(previous, s)
+    p_ref, tau_ref, slip_ref = fields(s)
+    # away from the patches' edges, where the square-root profile is not bilinear
+    inner = fields(s * 0.7)[0] > 0
+    assert np.abs(p - p_ref)[inner].max() < 0.02 * p_ref.max()
+    assert np.abs(tau - tau_ref)[:, inner].max() < 0.02 * 0.2 * p_ref.max()
+    beyond = np.min([np.hypot(iy - cy, ix - cx) - s * a0
+                     for (cy, cx), a0 in zip(centres, radii, strict=True)], axis=0) > 1.5
+    assert (p[beyond] == 0).all() and (tau[:, beyond] == 0).all()    # nothing beyond them
+    # the slip ring moves out with the patch (a ring two cells wide: its edges within a cell)
+    ring = np.zeros_like(slip)
+    for (cy, cx), a0 in zip(centres, radii, strict=True):
+        r = np.hypot(iy - cy, ix - cx)
+        ring |= (r > 0.6 * s * a0 - 1) & (r < s * a0 + 1)
+    assert slip.any() and not (slip & ~ring).any()
+    assert slip.sum() == pytest.approx(slip_ref.sum(), rel=0.25)
+    # which steps: a growing normal load on a step without tangential load, none now
+    w0 = float(base.normal.force)
+    assert _normal_growth(base, None, 1.2 * w0, (0.0, 0.0), None, None, 0.3)
+    assert _normal_growth(base, None, 1.2 * w0, None, base.shift, None, 0.3)
+    assert not _normal_growth(base, None, 1.2 * w0, (0.01 * w0, 0.0), None, None, 0.3)
+    assert not _normal_growth(base, None, 0.8 * w0, (0.0, 0.0), None, None, 0.3)
+    assert not _normal_growth(base, np.zeros(grid.shape), 1.2 * w0, (0.0, 0.0), None, None,
+                              0.3)
+    assert not _normal_growth(base, None, 1.2 * w0, None, base.shift + 1e-9, None, 0.3)
+    assert not _normal_growth(base, None, None, (0.0, 0.0), None, None, 0.3)

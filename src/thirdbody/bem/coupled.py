@@ -17,7 +17,10 @@ rate is set by β and μ: the coupled residual falls by a roughly steady factor 
 measures keep it cheap:
 
 * the first passes, where the fields still move a lot, run on a grid twice as coarse
-  (recursively), whose pressure and shear start the fine passes;
+  (recursively), whose pressure and shear start the fine passes; except under a growing
+  normal load with no tangential load (Spence's problem, self-similar: p and τ scale with the
+  contact radius a), where the previous step stretched by a/a₀ = (W/W₀)^(1/3) about each contact
+  patch's centre starts them (:func:`_stretched`);
 * each pass solves its halves only a hundredth below the last coupled residual (inexact
   alternation), the last one at the full tolerance;
 * the slip cells of the last pass start on their new friction limit.
@@ -35,6 +38,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy import ndimage
 
 from .._citations import cites
 from ..material import Material
@@ -42,7 +46,7 @@ from .grid import Grid, coarse_grid, embed, fast_span, prolong, restrict
 from .normal import ContactAtEdgeError, ConvergenceError, _kkt, solve_normal
 from .operator import coupling_operator, surface_displacements
 from .pair import ElasticPair
-from .tangential import TangentialContact, restart_traction, solve_tangential_from
+from .tangential import TangentialContact, _vector, restart_traction, solve_tangential_from
 
 __all__ = ["solve_coupled"]
 
@@ -152,6 +156,13 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
         last = (tau, embed(inner.slip, box, grid.shape))
         history = list(inner.coupling_changes)
         sub_tol = tol
+    elif pair.coupled and initial is None and _normal_growth(
+            previous, previous_pressure, force, tangential_force, shift, twist, mu):
+        # Spence's problem: the previous step, stretched, predicts this one better than the
+        # coarse passes (measured: the same fine passes or one more, without the coarse ones)
+        p_guess, tau, slip_guess = _stretched(previous, (force / previous.normal.force)
+                                              ** (1 / 3))
+        last = (tau, slip_guess)
     elif pair.coupled and initial is None and min(grid.shape) >= _COARSEST \
             and max(grid.shape) >= 2 * _COARSEST:
         # the first passes, where the fields still move a lot, on a grid twice as coarse
@@ -194,6 +205,58 @@ def solve_coupled(gap: np.ndarray, grid: Grid, pair: ElasticPair | Material, mu:
     raise ConvergenceError(
         f"normal-tangential coupling did not converge in {max_passes} passes (last changes "
         f"{rates}; coupling_tol {coupling_tol:.1e}): try smaller load steps")
+
+
+def _normal_growth(previous, previous_pressure, force, tangential_force, shift, twist,
+                   mu: float) -> bool:
+    """Whether the step only raises the normal force on a step that carried no tangential
+    load: force control with W >= W₀ of ``previous`` (whose pressure is the reference), no
+    tangential force before (below 10⁻⁶ μW₀) nor now (below 10⁻⁶ μW), or the previous shift
+    kept, and no twist."""
+    if previous is None or previous_pressure is not None or force is None \
+            or twist is not None or previous.twist != 0:
+        return False
+    w0 = float(previous.normal.force)
+    if not (0 < w0 <= force) or np.hypot(*previous.force) > 1e-6 * mu * w0:
+        return False
+    if tangential_force is not None:
+        return bool(np.hypot(*_vector(tangential_force, "tangential_force"))
+                    <= 1e-6 * mu * force)
+    return bool(np.array_equal(_vector(shift, "shift"), previous.shift))
+
+
+def _stretched(previous: TangentialContact, s: float):
+    """The previous step's pressure and shear (Pa) and slip set, each contact patch stretched
+    by ``s`` about its pressure centroid and scaled by ``s``: Spence's fields under a growing
+    normal load on a Hertzian patch (self-similar, p and τ proportional to the contact radius,
+    which grows by ``s`` = (W/W₀)^(1/3)). Bilinear interpolation; the slip set nearest."""
+    p0 = previous.normal.pressure
+    contact = previous.normal.contact
+    fields = np.concatenate([p0[None], np.where(contact, previous.traction, 0.0),
+                             previous.slip[None].astype(float)])
+    out = np.zeros_like(fields)
+    labels, _ = ndimage.label(contact)
+    ny, nx = p0.shape
+    for k, box in enumerate(ndimage.find_objects(labels), start=1):
+        if box is None:
+            continue
+        mine = labels == k
+        weight = p0[box] * mine[box]
+        if not weight.sum() > 0:
+            continue
+        iy, ix = np.mgrid[box[0], box[1]]
+        cy, cx = (weight * iy).sum() / weight.sum(), (weight * ix).sum() / weight.sum()
+        # the patch grows by (s - 1) of its size: map the cells of the widened box back
+        span = []
+        for sl, n in zip(box, (ny, nx), strict=True):
+            grow = int(np.ceil((s - 1) * (sl.stop - sl.start))) + 2
+            span.append(slice(max(sl.start - grow, 0), min(sl.stop + grow, n)))
+        jy, jx = np.mgrid[span[0], span[1]].astype(float)
+        coords = np.array([cy + (jy - cy) / s, cx + (jx - cx) / s])
+        for f, field in enumerate(fields):
+            out[f][span[0], span[1]] += ndimage.map_coordinates(
+                field * mine, coords, order=0 if f == 3 else 1, mode="constant")
+    return s * out[0], s * out[1:3], out[3] > 0.5
 
 
 def _solve_in_box(gap, grid, pair, mu, force, approach, tangential_force, shift, previous,
