@@ -114,22 +114,18 @@ def _residual(step, gap, pair) -> float:
     return float(max(inside, outside) / np.abs(u).max())
 
 
-def _best(fn, *args):
+def _best(fn, *args, clock=time.perf_counter):
+    """The best of :data:`REPEAT` calls by ``clock`` (s), and the last call's result."""
     best, out = np.inf, None
     for _ in range(REPEAT):
-        t0 = time.perf_counter()
+        t0 = clock()
         out = fn(*args)
-        best = min(best, time.perf_counter() - t0)
+        best = min(best, clock() - t0)
     return best, out
 
 
 def _cpu_best(fn, *args):
-    best, out = np.inf, None
-    for _ in range(REPEAT):
-        t0 = time.process_time()
-        out = fn(*args)
-        best = min(best, time.process_time() - t0)
-    return best, out
+    return _best(fn, *args, clock=time.process_time)
 
 
 def _compare_start(cases, sizes, mat) -> None:
