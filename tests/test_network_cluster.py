@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import thirdbody as tb
 from thirdbody.network import Body
@@ -814,3 +815,62 @@ def test_a_convergence_error_names_a_contact_past_the_half_space_limit():
     assert cluster._beyond_half_space(problem, ev(0.0, HALF_SPACE_LIMIT)) == ""
     text = cluster._beyond_half_space(problem, ev(0.05, 0.42, 0.2))
     assert "(1, 'lower')" in text and "a/R = 0.42" in text and "half-space" in text
+
+
+# --- the secant predictor: a guess of the step's motion ----------------------------------------
+@pytest.fixture(scope="module")
+def two_steps():
+    """Two tilted ellipsoids (apart, the first turned 90° about z, listed right to left: the
+    solver's order is not theirs) pressed with 1 N, then 1.5 N from there: the second step
+    without a guess."""
+    numerics = ClusterNumerics(resolution=20, tol=1e-5)
+    right = tilted(1.5e-3)
+    right = right.moved(rotation=Rotation.from_euler("z", 90, degrees=True) * right.rotation)
+    first = solve_cluster([right, tilted(-1.5e-3)], mu_up=0.6, mu_low=0.6, force=F,
+                          numerics=numerics)
+    start = dict(bodies=list(first.bodies), histories=first.histories, mu_up=0.6, mu_low=0.6,
+                 force=1.5 * F, gap_start=first.gap, numerics=numerics)
+    return start, solve_cluster(**start)
+
+
+def test_a_step_guessed_at_its_own_answer_converges_in_its_first_pass(two_steps):
+    """The guess is where the first pass evaluates: guessing the converged motion, the step is
+    done there (or one pass later: the contacts are solved afresh, within the BEM's own
+    tolerance), and ends where the unguessed step ended, within the equilibrium tolerance."""
+    start, plain = two_steps
+    assert plain.iterations >= 3
+    assert np.abs(plain.rotation).max() > 1e-5              # the ellipsoids turn in the step
+    guessed = solve_cluster(**start, guess=(plain.translation, plain.rotation, plain.gap))
+    check_balanced(guessed)
+    assert guessed.iterations <= 2
+    # the gap's change over the step agrees to the equilibrium tolerance times its size
+    change = plain.gap - start["gap_start"]
+    assert abs(guessed.gap - plain.gap) < 1e-3 * abs(change)
+    assert np.abs(guessed.rotation - plain.rotation).max() < 1e-3 * np.abs(plain.rotation).max()
+
+
+def test_a_guess_far_from_equilibrium_is_dropped_and_the_step_is_the_unguessed_one(two_steps):
+    """A guess that drives both particles 20 µm into the lower plate: its residual is far
+    above GUESS_LIMIT, so the step starts from the start poses, bit for bit the step without
+    a guess, one pass (the guess's) more."""
+    start, plain = two_steps
+    down = np.zeros((2, 3))
+    down[:, 2] = -2e-5
+    dropped = solve_cluster(**start, guess=(down, np.zeros((2, 3)), None))
+    assert dropped.iterations == plain.iterations + 1
+    assert dropped.bem_solves >= plain.bem_solves
+    assert dropped.gap == plain.gap
+    assert np.array_equal(dropped.translation, plain.translation)
+    assert np.array_equal(dropped.rotation, plain.rotation)
+
+
+@pytest.mark.parametrize(("guess", "match"), [
+    ((np.zeros((3, 3)), np.zeros((2, 3)), None), r"guess translation must be a finite \(2, 3\)"),
+    ((np.zeros((2, 3)), np.full((2, 3), np.nan), None), r"guess rotation must be a finite"),
+    ((np.zeros((2, 3)), np.zeros((2, 3)), -1.0), r"guess gap must be a finite number > 0"),
+    ((np.zeros((2, 3)),), r"guess must be \(translation"),
+])
+def test_a_bad_guess_names_the_field(guess, match):
+    with pytest.raises(ValueError, match=match):
+        solve_cluster([tilted(-1.5e-3), tilted(1.5e-3)], mu_up=0.6, mu_low=0.6, force=F,
+                      guess=guess)

@@ -18,6 +18,7 @@ import pytest
 
 import thirdbody as tb
 from thirdbody.io import ConfigError, parse_config
+from thirdbody.loading import LoadStep
 from thirdbody.network.cluster import HalfSpaceWarning
 from thirdbody.shapes import Sphere
 
@@ -277,7 +278,9 @@ def test_a_periodic_box_must_hold_the_particles():
 
 
 # --- results file and resume -------------------------------------------------------------------
-def test_a_run_resumed_after_step_1_ends_as_the_uninterrupted_one(row):
+def test_a_run_resumed_after_step_2_ends_as_the_uninterrupted_one(row):
+    """Step 3 starts from the secant predicted by step 2 (the state's last step), so a resume
+    that lost it would start elsewhere and stop elsewhere within the tolerance."""
     _, ds = row
     make = lambda: tb.Simulation(_row(), tb.Plates(0.3), tb.LinearRamp(stop=3.0, steps=4),  # noqa: E731
                                  mu_pp=0.3, resolution=20, box=(6 * R, 4 * R))
@@ -285,7 +288,8 @@ def test_a_run_resumed_after_step_1_ends_as_the_uninterrupted_one(row):
     blob = None
     for record, _, current in first.steps():
         first.records.append(record)
-        if record.step == 1:
+        if record.step == 2:
+            assert current.last_step is not None and current.last_step.gap < 0
             blob = first.snapshot(current)
             break
     with warnings.catch_warnings():
@@ -621,3 +625,55 @@ def test_a_particle_rolls_only_when_it_turns(kinematics, turned, plates, touches
     state = particle_state(kinematics, turned, contacts, plates, touches)
     assert state == expected
     assert state in tb.schema.STATES
+
+
+# --- the secant predictor between steps --------------------------------------------------------
+def _last(kind="force", value=2.0, normal=1.0, shift=(0.0, 0.0)):
+    from thirdbody.network.run import _LastStep
+
+    motion = np.array([[1e-7, -2e-7, -3e-6], [0.0, 4e-7, -1e-6]])
+    turn = np.array([[1e-4, 0.0, 0.0], [0.0, -2e-4, 5e-5]])
+    return _LastStep(kind, value, normal, shift, motion, turn, -2e-6)
+
+
+@pytest.mark.parametrize(("last", "step", "ratio"), [
+    # a compression by force: the same increment again, then half of it
+    (_last(), LoadStep("force", 3.0), 1.0),
+    (_last(), LoadStep("force", 2.5), 0.5),
+    # by compression, an increment twice the last
+    (_last("compression", 0.02, 0.01), LoadStep("compression", 0.04), 2.0),
+    # sliding on at a fixed load, 3 µm after 2 µm along the same direction
+    (_last(value=2.0, normal=0.0, shift=(2e-6, 0.0)), LoadStep("force", 2.0, (3e-6, 0.0)),
+     1.5),
+])
+def test_the_next_step_is_guessed_from_the_last_one_by_the_ratio_of_increments(last, step,
+                                                                                ratio):
+    from thirdbody.network.run import _predicted
+
+    translation, rotation, gap = _predicted(last, step, 1e-3)
+    assert np.array_equal(translation, ratio * last.translation)
+    assert np.array_equal(rotation, ratio * last.rotation)
+    assert gap == 1e-3 + ratio * last.gap
+
+
+@pytest.mark.parametrize(("last", "step"), [
+    (None, LoadStep("force", 1.0)),                                  # the first step
+    (_last(), LoadStep("force", 1.5)),                               # unloading: a reversal
+    (_last(), LoadStep("force", 2.0)),                               # no increment
+    (_last(), LoadStep("compression", 0.1)),                         # another kind
+    (_last(), LoadStep("force", 2.0, (1e-6, 0.0))),                  # the plate starts to slide
+    (_last(normal=0.0, shift=(1e-6, 0.0)), LoadStep("force", 2.0, (-1e-6, 0.0))),  # reversal
+    (_last(normal=0.0, shift=(1e-6, 0.0)), LoadStep("force", 2.0, (0.0, 1e-6))),   # turns 90°
+    (_last(normal=0.0, shift=(1e-6, 0.0)), LoadStep("force", 2.5, (1e-6, 0.0))),   # and loads
+])
+def test_no_guess_where_the_load_turns_or_changes_kind(last, step):
+    from thirdbody.network.run import _predicted
+
+    assert _predicted(last, step, 1e-3) is None
+
+
+def test_a_guessed_gap_is_never_below_half_the_last_one():
+    from thirdbody.network.run import _predicted
+
+    last = _last()._replace(gap=-8e-4)
+    assert _predicted(last, LoadStep("force", 3.0), 1e-3)[2] == 5e-4

@@ -78,6 +78,9 @@ class NetworkState:
         slid), m; None until it slides.
     slide_direction : (2,) tuple or None
         Unit vector of the last sliding increment; None until the plate slides.
+    last_step : _LastStep or None
+        The last step's load increment and motion, from which the next step's first pass is
+        predicted (:func:`_predicted`); None before the first step.
     """
 
     bodies: list
@@ -90,6 +93,45 @@ class NetworkState:
     sliding_distance: float = 0.0
     slide_gap: float | None = None
     slide_direction: tuple | None = None
+    # the secant predictor (a checkpoint written before it reads as a run without a last step)
+    last_step: _LastStep | None = None
+
+
+class _LastStep(NamedTuple):
+    """What a step predicts the next one from: its load increment and the motion it caused."""
+
+    kind: str               # LoadStep.kind
+    value: float            # LoadStep.value at its end (N or the compression)
+    normal: float           # the increment of value in the step
+    shift: tuple            # the plate's horizontal increment, m
+    translation: np.ndarray  # (n, 3) m, each particle's, unwrapped
+    rotation: np.ndarray    # (n, 3) rad, world-frame rotation vectors
+    gap: float              # the plate gap's change in the step, m
+
+
+def _predicted(last: _LastStep | None, step: LoadStep, gap: float | None):
+    """The ``guess`` of :func:`solve_cluster` for ``step``: the last step's motion and gap
+    change times the ratio of the load increments (a secant predictor), when both steps load
+    the same way: the same kind and, if the plate slides in either, both slide in the same
+    direction at a fixed normal load; else None (a reversal, a change of direction or of
+    kind, or the first step). A secant in a steady compression or sliding starts the first
+    pass 5 to 10 times closer to the equilibrium than the start poses do."""
+    if last is None or gap is None or last.kind != step.kind:
+        return None
+    normal = step.value - last.value
+    shift, before = np.asarray(step.shift, dtype=float), np.asarray(last.shift, dtype=float)
+    size, size_before = float(np.hypot(*shift)), float(np.hypot(*before))
+    if size > 0 or size_before > 0:
+        if not (size > 0 and size_before > 0 and normal == 0 and last.normal == 0
+                and float(shift @ before) > 0.999 * size * size_before):
+            return None
+        ratio = size / size_before
+    elif last.normal != 0 and normal / last.normal > 0:
+        ratio = normal / last.normal
+    else:
+        return None
+    return (ratio * last.translation, ratio * last.rotation,
+            max(gap + ratio * last.gap, 0.5 * gap))
 
 
 class _Sliding(NamedTuple):
@@ -211,7 +253,8 @@ class NetworkEngine:
         sliding = _Sliding.after(state, step)           # refuses a slide before any load
         result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
                                mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
-                               plate_shift=step.shift, numerics=self.numerics, **load)
+                               plate_shift=step.shift, numerics=self.numerics,
+                               guess=_predicted(state.last_step, step, state.gap), **load)
         starts = [b.rotation for b in state.bodies]
         bodies, histories = list(result.bodies), dict(result.histories)
         if self.box is not None:
@@ -220,6 +263,12 @@ class NetworkEngine:
         energy = self._energy(step, state, result)
         record = self._record(k, step, result, starts, displacement, sliding, energy,
                               time.perf_counter() - t0, state.histories, state.plate_shift)
+        previous = (0.0 if state.last_step is None or state.last_step.kind != step.kind
+                    else state.last_step.value)
+        if state.gap is not None:
+            state.last_step = _LastStep(step.kind, step.value, step.value - previous,
+                                        tuple(float(v) for v in step.shift), result.translation,
+                                        result.rotation, result.gap - state.gap)
         state.bodies, state.histories, state.gap = bodies, histories, result.gap
         state.displacement = displacement
         (state.plate_shift, state.sliding_distance, state.slide_gap,
