@@ -19,6 +19,11 @@ load; at the end the totals. A lattice touching at ``--gap 0`` with a spread of 
 network: the larger spheres press their neighbours along oblique normals.
 
     .venv/bin/python benchmarks/cluster_lattice.py --sizes 8 --gap 0 --spread 0.02 --steps 20
+
+``--guess`` starts each step from the secant predictor a run uses (the last step's motion times
+the ratio of the load increments: ``thirdbody.network.run._predicted``); ``--guess both`` runs
+the program with and without it, alternating in one process, and prints the passes and CPU
+seconds of each.
 """
 
 from __future__ import annotations
@@ -29,8 +34,10 @@ import time
 import numpy as np
 
 import thirdbody as tb
+from thirdbody.loading import LoadStep
 from thirdbody.network import Body
 from thirdbody.network.cluster import ClusterConvergenceError, ClusterNumerics, solve_cluster
+from thirdbody.network.run import _LastStep, _predicted
 from thirdbody.shapes import Sphere
 
 R = 1e-3        # m
@@ -50,24 +57,35 @@ def lattice(n: int, spread: float, gap: float, seed: int = 1) -> tuple[list[Body
     return bodies, n * spacing
 
 
-def compress(n: int, spread: float, gap: float, steps: int, resolution: float) -> None:
-    """F_N in ``steps`` equal steps to 0.5 N per particle, warm started step to step."""
+def compress(n: int, spread: float, gap: float, steps: int, resolution: float,
+             guess: bool = False) -> tuple[int, float] | None:
+    """F_N in ``steps`` equal steps to 0.5 N per particle, warm started step to step (and
+    from the secant predictor if ``guess``). Returns the passes and the CPU seconds, or None
+    when a step failed."""
     bodies, side = lattice(n, spread, gap)
     numerics = ClusterNumerics(resolution=resolution, tol=1e-5)
     histories, gap_start, total = {}, None, time.perf_counter()
+    cpu = time.process_time()
     shares = {"narrow": 0.0, "contacts": 0.0, "newton": 0.0}
     passes = solves = 0
+    last = None
     for k in range(1, steps + 1):
         start = time.perf_counter()
+        force = 0.5 * n * n * k / steps
+        step = LoadStep("force", force)
         try:
             result = solve_cluster(bodies, histories, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
-                                   force=0.5 * n * n * k / steps, gap_start=gap_start,
-                                   box=(side, side), numerics=numerics)
+                                   force=force, gap_start=gap_start, box=(side, side),
+                                   numerics=numerics,
+                                   guess=_predicted(last, step, gap_start) if guess else None)
         except (ClusterConvergenceError, ValueError) as exc:
             print(f"{n * n:4d} particles, step {k}: not converged after "
                   f"{time.perf_counter() - start:.1f} s: {exc}")
-            return
+            return None
         seconds = time.perf_counter() - start
+        if gap_start is not None:
+            last = _LastStep("force", force, 0.5 * n * n / steps, (0.0, 0.0), result.translation,
+                             result.rotation, result.gap - gap_start)
         bodies, histories, gap_start = list(result.bodies), result.histories, result.gap
         pairs = [c for c in result.contacts if isinstance(c.j, int) and c.normal_force > 0]
         t = result.timings
@@ -82,10 +100,12 @@ def compress(n: int, spread: float, gap: float, steps: int, resolution: float) -
               f"{t.get('contacts', 0) / seconds:4.0%}, model {t.get('newton', 0) / seconds:4.0%}),"
               f" {len(pairs)} loaded particle contacts", flush=True)
     wall = time.perf_counter() - total
-    print(f"{n * n:4d} particles: {steps} steps in {wall:.0f} s ({wall / steps:.1f} s/step), "
-          f"{passes / steps:.1f} passes/step, {solves} BEM solves; detection "
-          f"{shares['narrow'] / wall:.0%}, BEM {shares['contacts'] / wall:.0%}, model "
-          f"{shares['newton'] / wall:.0%}")
+    cpu = time.process_time() - cpu
+    print(f"{n * n:4d} particles{' (guessed)' if guess else ''}: {steps} steps in {wall:.0f} s "
+          f"({wall / steps:.1f} s/step, CPU {cpu:.0f} s), {passes / steps:.1f} passes/step, "
+          f"{solves} BEM solves; detection {shares['narrow'] / wall:.0%}, BEM "
+          f"{shares['contacts'] / wall:.0%}, model {shares['newton'] / wall:.0%}", flush=True)
+    return passes, cpu
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -97,10 +117,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--resolution", type=float, default=20.0)
     parser.add_argument("--steps", type=int, default=0,
                         help="a compression program of this many force steps (0: one solve)")
+    parser.add_argument("--guess", choices=("no", "yes", "both"), default="no",
+                        help="start each step from the secant predictor (both: A/B)")
     args = parser.parse_args(argv)
     for n in args.sizes:
         if args.steps:
-            compress(n, args.spread, args.gap, args.steps, args.resolution)
+            modes = {"no": [False], "yes": [True], "both": [True, False, True, False]}
+            runs = {True: [], False: []}
+            for guess in modes[args.guess]:
+                out = compress(n, args.spread, args.gap, args.steps, args.resolution, guess)
+                if out is not None:
+                    runs[guess].append(out)
+            if args.guess == "both" and runs[True] and runs[False]:
+                best = {g: min(r[1] for r in runs[g]) for g in runs}
+                print(f"{n * n:4d} particles: passes {runs[True][0][0]} guessed / "
+                      f"{runs[False][0][0]} not; CPU best of {len(runs[True])}: "
+                      f"{best[True]:.0f} / {best[False]:.0f} s = {best[True] / best[False]:.2f}")
             continue
         bodies, side = lattice(n, args.spread, args.gap)
         start = time.perf_counter()

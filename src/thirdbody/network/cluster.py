@@ -1557,7 +1557,7 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
 #: above it the step starts from the start poses. A step from the start poses begins at about
 #: the load increment over the load (0.05 to 1 in the runs measured); a secant guess in a
 #: smooth compression begins near 1e-3
-GUESS_LIMIT = 0.02
+GUESS_LIMIT = 0.05
 
 
 def _guess(guess, n: int):
