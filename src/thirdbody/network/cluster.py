@@ -99,7 +99,7 @@ from .broad import candidate_pairs
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
 from .narrow import closest_approach
 from .plate import PlateContact, solve_plate
-from .stiffness import ContactModel, ModelStack, TangentialLaws, cross
+from .stiffness import ContactModel, ModelStack, TangentialLaws, _cross, cross
 
 __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
            "ContactReport", "solve_cluster", "wrap"]
@@ -856,14 +856,13 @@ class _Terms:
 
 def _terms(problem: _Problem, ev: _Evaluation) -> _Terms:
     scale = ev.scale if ev.scale > 0 else (problem.force or 0.0)
-    rows = []                       # (a, b, upper, model, wrench_a, wrench_b, N, k, σ, bem, reach)
+    rows = []                       # (a, b, upper, model, N, k, σ, bem, reach)
     for c in ev.contacts:
         m = c.model
-        wa, wb = m.wrenches()
         plate = isinstance(c.contact, PlateContact)
         a, b = (c.key[0], -1) if plate else c.roles
-        rows.append((a, b, plate and c.key[1] == "upper", m, wa, wb, m.normal_force,
-                     m.k_normal, 0.0, True, 0.0))
+        rows.append((a, b, plate and c.key[1] == "upper", m, m.normal_force, m.k_normal, 0.0,
+                     True, 0.0))
     for p in ev.potential if scale > 0 else ():
         # Hertz at the force scale: δ = (9 N² / (16 E*² R))^(1/3), k = 3N/(2δ)
         delta = (9.0 * scale**2 / (16.0 * p.E_star**2 * p.radius)) ** (1.0 / 3.0)
@@ -871,17 +870,11 @@ def _terms(problem: _Problem, ev: _Evaluation) -> _Terms:
         k0 = 8.0 * math.sqrt(p.radius * delta) / p.compliance if p.mu > 0 else 0.0
         m = ContactModel.spring(normal=p.normal, point=p.point, centre_a=p.centre_a,
                                 centre_b=p.centre_b, stiffness=k, tangential=k0, mu=p.mu)
-        f = k * p.sigma * m.normal                  # −N n with N = −k σ
-        ra, rb = m.arms
-        wa = np.concatenate([f, cross(ra, f)])
-        wb = np.concatenate([-f, -cross(rb, f)])
         plate = p.roles[1] in PLATES
         a, b = (p.roles[0], -1) if plate else p.roles
-        rows.append((a, b, plate and p.roles[1] == "upper", m, wa, wb, 0.0, k, p.sigma, False,
-                     delta))
+        rows.append((a, b, plate and p.roles[1] == "upper", m, 0.0, k, p.sigma, False, delta))
     count = len(rows)
-    models = [r[3] for r in rows]
-    bases = [m.base_blocks() for m in models]
+    models = ModelStack([r[3] for r in rows])
     a = np.array([r[0] for r in rows], dtype=int)
     b = np.array([r[1] for r in rows], dtype=int)
     slots = np.full((count, 4), -1, dtype=int)
@@ -889,17 +882,17 @@ def _terms(problem: _Problem, ev: _Evaluation) -> _Terms:
     for m, (r, q) in enumerate(zip(a.tolist(), b.tolist(), strict=True)):
         for j, key in enumerate(((r, r), (r, q), (q, r), (q, q)) if q >= 0 else ((r, r),)):
             slots[m, j] = keys.setdefault(key, len(keys))
-
-    def stack(values, shape):
-        return np.array(values, dtype=float).reshape((count, *shape))
-
-    return _Terms(a, b, np.array([r[2] for r in rows], dtype=bool), ModelStack(models),
-                  stack([x[0] for x in bases], (6, 12)), stack([x[1] for x in bases], (6, 12)),
-                  stack([r[4] for r in rows], (6,)), stack([r[5] for r in rows], (6,)),
-                  stack([r[6] for r in rows], ()), stack([r[7] for r in rows], ()),
-                  stack([r[8] for r in rows], ()), np.array([r[9] for r in rows], dtype=bool),
-                  stack([r[10] for r in rows], ()), slots,
-                  np.array(list(keys), dtype=int).reshape(len(keys), 2))
+    N, kn, sigma, bem, reach = (np.array([r[j] for r in rows], dtype=float).reshape(count)
+                                for j in range(4, 9))
+    bem = bem.astype(bool)
+    # an open contact's wrench: of −N n with N = −k σ
+    f = (kn * sigma)[:, None] * models.normal
+    spring_a = np.concatenate([f, _cross(models.arm_a, f)], axis=1)
+    spring_b = np.concatenate([-f, -_cross(models.arm_b, f)], axis=1)
+    return _Terms(a, b, np.array([r[2] for r in rows], dtype=bool), models, models.base_a,
+                  models.base_b, np.where(bem[:, None], models.wrench_a, spring_a),
+                  np.where(bem[:, None], models.wrench_b, spring_b), N, kn, sigma, bem, reach,
+                  slots, np.array(list(keys), dtype=int).reshape(len(keys), 2))
 
 
 def _components(n: int, pairs: list[tuple[int, int]]) -> list[list[int]]:

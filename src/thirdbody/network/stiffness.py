@@ -53,7 +53,6 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from functools import cached_property
 
 import numpy as np
 
@@ -232,116 +231,6 @@ class ContactModel:
     def sliding(self) -> bool:
         return self.slip_direction is not None
 
-    @property
-    def force_on_a(self) -> np.ndarray:
-        return -self.normal_force * self.normal + self.tangential_force
-
-    @property
-    def arms(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.point - self.centre_a, self.point - self.centre_b
-
-    def relative_rows(self) -> np.ndarray:
-        """dt (3, 12): b's material point at x_p relative to a's, for (du_a, dφ_a, du_b, dφ_b)."""
-        ra, rb = self.arms
-        return np.hstack([-_I, skew(ra), _I, -skew(rb)])
-
-    def approach_row(self) -> np.ndarray:
-        """dδ (12,) (:attr:`_approach_row`; computed once per model, not to be modified)."""
-        return self._approach_row
-
-    def tangential_rows(self) -> np.ndarray:
-        """The shift increment's change (3, 12) (:attr:`_tangential_rows`; computed once per
-        model, not to be modified)."""
-        return self._tangential_rows
-
-    def _geometry(self):
-        """(ξ, dn, dr_a, dr_b) (:attr:`_geometry_rows`; computed once per model)."""
-        return self._geometry_rows
-
-    @cached_property
-    def _approach_row(self) -> np.ndarray:
-        """dδ (12,): the relative normal motion at the point of first touch (``touch``, the
-        closest points of the undeformed surfaces; the pressure centroid if not given): by the
-        envelope theorem the closest points' own migration does not change the separation to
-        first order. (The pressure centroid lies a fraction of a cell away, which matters
-        where the motions of a step nearly cancel in the approach: a rotation of the particle
-        against the plates' motion.)"""
-        if self.touch is None:
-            return -(self.normal @ self.relative_rows())
-        ra = self.touch - self.centre_a
-        rb = self.touch - self.centre_b
-        dt = np.hstack([-_I, skew(ra), _I, -skew(rb)])
-        return -(self.normal @ dt)
-
-    @cached_property
-    def _tangential_rows(self) -> np.ndarray:
-        """The shift increment's change (3, 12). Without the step's kinematics, ds = P dt.
-        With them (:meth:`stepping`): the evaluated increment is
-        Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at the
-        middle of the step, so ds = f P [dt(r̄) + ½ Δφ_b × dr_b − ½ Δφ_a × dr_a], dr the
-        levers' change (the contact point migrates)."""
-        n = self.normal
-        P = _I - np.outer(n, n)
-        if self.mid_a is None:
-            return P @ self.relative_rows()
-        dt = np.hstack([-_I, skew(self.mid_a), _I, -skew(self.mid_b)])
-        _, _, d_ra, d_rb = self._geometry()
-        dt = dt + 0.5 * (skew(self.turn_b) @ d_rb - skew(self.turn_a) @ d_ra)
-        return self.fraction * (P @ dt)
-
-    @cached_property
-    def _geometry_rows(self):
-        """(ξ, dn, dr_a, dr_b) as (3, 12) arrays: the contact point's migration over a, the
-        normal's turn and the levers' changes (module docstring)."""
-        n = self.normal
-        P = _I - np.outer(n, n)
-        ra, _ = self.arms
-        ua = np.hstack([_I, _O, _O, _O])
-        pa = np.hstack([_O, _I, _O, _O])
-        ub = np.hstack([_O, _O, _I, _O])
-        dt = self.relative_rows()
-        dpsi = np.hstack([_O, -_I, _O, _I])
-        H = P @ (self.curvature_a + self.curvature_b) @ P
-        Hplus = np.linalg.pinv(H, rcond=1e-9, hermitian=True)
-        xi = Hplus @ (self.curvature_b @ P @ dt - skew(n) @ dpsi)
-        dn = P @ (-skew(n) @ pa + self.curvature_a @ xi)
-        d_ra = -skew(ra) @ pa + xi
-        d_rb = ua - skew(ra) @ pa + xi - ub
-        return xi, dn, d_ra, d_rb
-
-    def wrenches(self) -> tuple[np.ndarray, np.ndarray]:
-        """The (6,) wrenches (force, moment about the centroid) on a and on b of the contact's
-        current force and twist."""
-        f = self.force_on_a
-        ra, rb = self.arms
-        m = self.twist_moment * self.normal
-        return (np.concatenate([f, cross(ra, f) + m]),
-                np.concatenate([-f, -cross(rb, f) - m]))
-
-    def base_blocks(self) -> tuple[np.ndarray, np.ndarray]:
-        """The (6, 12) blocks d(F_a, M_a), d(F_b, M_b) of everything but the tangential law:
-        the normal force's change, the rigid geometry (the normal turns, the point migrates, T
-        stays in the tangent plane) and the twist."""
-        n = self.normal
-        ra, rb = self.arms
-        f = self.force_on_a
-        N, T, m = self.normal_force, self.tangential_force, self.twist_moment
-        dpsi = np.hstack([_O, -_I, _O, _I])
-        # the contact point migrates over a (Montana) and the normal turns
-        _, dn, d_ra, d_rb = self._geometry()
-        dN = self.k_normal * self.approach_row()
-        df = -np.outer(n, dN) - N * dn - np.outer(n, T @ dn)
-        dm = self.k_twist * (n @ dpsi)
-        dMa = -skew(f) @ d_ra + skew(ra) @ df + np.outer(n, dm) + m * dn
-        dMb = skew(f) @ d_rb - skew(rb) @ df - np.outer(n, dm) - m * dn
-        return np.vstack([df, dMa]), np.vstack([-df, dMb])
-
-    @cached_property
-    def _projector(self) -> np.ndarray:
-        """I − n nᵀ (3, 3): onto the tangent plane (computed once per model, not to be
-        modified)."""
-        return _I - np.outer(self.normal, self.normal)
-
     def _stick_normal(self) -> np.ndarray:
         """dT/dN at a fixed shift of a contact in partial slip (3,): Cattaneo-Mindlin's
         T = μN [1 − (1 − u)^(3/2)] with u = s/s*, s* ∝ N^(2/3), gives
@@ -392,41 +281,121 @@ def _skews(v: np.ndarray) -> np.ndarray:
     return out
 
 
+def _vecmat(v: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """Row-wise v_iᵀ A_i (m, k) of (m, r) and (m, r, k) arrays (as ``v[i] @ A[i]``)."""
+    return np.matmul(v[:, None, :], A)[:, 0, :]
+
+
+_PA = np.hstack([_O, _I, _O, _O])       # dφ_a of (du_a, dφ_a, du_b, dφ_b)
+_UA = np.hstack([_I, _O, _O, _O])
+_UB = np.hstack([_O, _O, _I, _O])
+_DPSI = np.hstack([_O, -_I, _O, _I])    # the relative rotation dψ = dφ_b − dφ_a
+
+
+def _relative_rows(ra: np.ndarray, rb: np.ndarray) -> np.ndarray:
+    """dt (m, 3, 12): b's material point at levers ``ra``, ``rb`` (m, 3) from the centroids
+    relative to a's, for (du_a, dφ_a, du_b, dφ_b)."""
+    count = len(ra)
+    return np.concatenate([np.broadcast_to(-_I, (count, 3, 3)), _skews(ra),
+                           np.broadcast_to(_I, (count, 3, 3)), -_skews(rb)], axis=2)
+
+
 class ModelStack:
-    """The models of m contacts stacked (arrays whose first axis runs over the contacts), to
-    evaluate their tangential laws and those laws' blocks for all contacts at once: the Newton
-    step's active set (:mod:`~thirdbody.network.cluster`) does so at every pass, where one call
-    per contact cost more than the rest of its model (a 100-sphere lattice: 305,000 calls of
-    the per-contact law in two load steps)."""
+    """The models of m contacts stacked (arrays whose first axis runs over the contacts), all
+    computed at once (module docstring): the rows of the approach ``approach_rows`` (m, 12) and
+    of the shift increment ``tangential_rows`` (m, 3, 12), the blocks of everything but the
+    tangential law ``base_a``, ``base_b`` (m, 6, 12), the wrenches of the current forces
+    ``wrench_a``, ``wrench_b`` (m, 6), and at any predicted motion the tangential laws
+    (:meth:`laws`) and their blocks (:meth:`law_blocks`). The Newton step
+    (:mod:`~thirdbody.network.cluster`) stacks its contacts once and evaluates their laws at
+    every pass of its active set, where one call per contact and pass cost more than the rest
+    of the model (a 100-sphere lattice: 305,000 calls of the per-contact law in two load
+    steps)."""
 
     def __init__(self, models: Sequence[ContactModel]) -> None:
         models = tuple(models)
         self.models = models
-        self.sliding = np.array([c.sliding for c in models], dtype=bool)
-        self.normal_force = np.array([c.normal_force for c in models], dtype=float)
-        self.mu = np.array([c.mu for c in models], dtype=float)
-        self.k_stick = np.array([c.k_stick for c in models], dtype=float)
-        self.k_loading = np.array([c.k_loading for c in models], dtype=float)
-        self.k_across = np.array([c.k_across for c in models], dtype=float)
-        self.k_normal = np.array([c.k_normal for c in models], dtype=float)
+        count = len(models)
         zero = np.zeros(3)
-        self.tangential_force = _stack([c.tangential_force for c in models], (3,))
-        self.projector = _stack([c._projector for c in models], (3, 3))
+
+        def field(name: str, shape: tuple = (3,), default=None) -> np.ndarray:
+            values = [getattr(c, name) for c in models]
+            return _stack([default if v is None else v for v in values], shape)
+
+        self.sliding = np.array([c.sliding for c in models], dtype=bool)
+        self.normal_force = field("normal_force", ())
+        self.mu = field("mu", ())
+        self.k_stick = field("k_stick", ())
+        self.k_loading = field("k_loading", ())
+        self.k_across = field("k_across", ())
+        self.k_normal = field("k_normal", ())
+        self.tangential_force = field("tangential_force")
         #: the slip direction of a sliding contact (zero for one with stick cells)
-        self.direction = _stack([zero if c.slip_direction is None else c.slip_direction
-                                 for c in models], (3,))
+        self.direction = field("slip_direction", default=zero)
         #: a sliding contact's slip in the step (zero for one with stick cells)
         self.back = _stack([c.slipped if c.sliding and c.slipped is not None else zero
                             for c in models], (3,))
         #: dT/dN at a fixed shift of a contact with stick cells (zero for a sliding one)
         self.stick_g = _stack([zero if c.sliding else c._stick_normal() for c in models], (3,))
-        self.approach_rows = _stack([c.approach_row() for c in models], (12,))
-        self.tangential_rows = _stack([c.tangential_rows() for c in models], (3, 12))
-        self.arm_a = _stack([c.arms[0] for c in models], (3,))
-        self.arm_b = _stack([c.arms[1] for c in models], (3,))
+        n = field("normal")
+        point = field("point")
+        centre_a, centre_b = field("centre_a"), field("centre_b")
+        touch = _stack([c.point if c.touch is None else c.touch for c in models], (3,))
+        curvature_a, curvature_b = field("curvature_a", (3, 3)), field("curvature_b", (3, 3))
+        self.normal = n
+        self.projector = P = _I - _outer(n, n)
+        self.arm_a, self.arm_b = ra, rb = point - centre_a, point - centre_b
+        self._skew_a, self._skew_b = _skews(ra), _skews(rb)
+        # dδ (m, 12): the relative normal motion at the point of first touch (the closest
+        # points of the undeformed surfaces; the pressure centroid if not known): by the
+        # envelope theorem the closest points' own migration does not change the separation to
+        # first order (the pressure centroid lies a fraction of a cell away, which matters
+        # where the motions of a step nearly cancel in the approach: a rotation of the particle
+        # against the plates' motion)
+        self.approach_rows = -_vecmat(n, _relative_rows(touch - centre_a, touch - centre_b))
+        # the contact point's migration over a ξ, the normal's turn dn and the levers' changes
+        # (m, 3, 12) (module docstring)
+        dt = _relative_rows(ra, rb)
+        H = np.matmul(np.matmul(P, curvature_a + curvature_b), P)
+        H_plus = np.linalg.pinv(H, rcond=1e-9, hermitian=True)
+        skew_n = _skews(n)
+        xi = np.matmul(H_plus, np.matmul(np.matmul(curvature_b, P), dt) -
+                       np.matmul(skew_n, _DPSI))
+        dn = np.matmul(P, np.matmul(-skew_n, _PA) + np.matmul(curvature_a, xi))
+        d_ra = np.matmul(-self._skew_a, _PA) + xi
+        d_rb = _UA - np.matmul(self._skew_a, _PA) + xi - _UB
+        # the shift increment's change (m, 3, 12). Without the step's kinematics ds = P dt.
+        # With them (:meth:`ContactModel.stepping`): the evaluated increment is
+        # Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at
+        # the middle of the step, so ds = f P [dt(r̄) + ½ Δφ_b × dr_b − ½ Δφ_a × dr_a], dr the
+        # levers' change (the contact point migrates)
+        stepping = np.array([c.mid_a is not None for c in models], dtype=bool)
+        middle = _relative_rows(field("mid_a", default=zero), field("mid_b", default=zero)) + \
+            0.5 * (np.matmul(_skews(field("turn_b", default=zero)), d_rb) -
+                   np.matmul(_skews(field("turn_a", default=zero)), d_ra))
+        self.tangential_rows = np.where(stepping[:, None, None],
+                                        field("fraction", ())[:, None, None] *
+                                        np.matmul(P, middle), np.matmul(P, dt))
         self._dN_rows = self.k_normal[:, None] * self.approach_rows
-        self._skew_a = _skews(self.arm_a)
-        self._skew_b = _skews(self.arm_b)
+        # the blocks of everything but the tangential law (m, 6, 12): the normal force's
+        # change, the rigid geometry (the normal turns, the point migrates, T stays in the
+        # tangent plane) and the twist
+        N, T = self.normal_force, self.tangential_force
+        twist = field("twist_moment", ())
+        f = (-N)[:, None] * n + T
+        df = -_outer(n, self._dN_rows) - N[:, None, None] * dn - _outer(n, _vecmat(T, dn))
+        dm = field("k_twist", ())[:, None] * _vecmat(n, np.broadcast_to(_DPSI, (count, 3, 12)))
+        skew_f = _skews(f)
+        dMa = np.matmul(-skew_f, d_ra) + np.matmul(self._skew_a, df) + _outer(n, dm) + \
+            twist[:, None, None] * dn
+        dMb = np.matmul(skew_f, d_rb) - np.matmul(self._skew_b, df) - _outer(n, dm) - \
+            twist[:, None, None] * dn
+        self.base_a = np.concatenate([df, dMa], axis=1)
+        self.base_b = np.concatenate([-df, dMb], axis=1)
+        # the wrenches (m, 6) of the current force and twist on a and b
+        moment = twist[:, None] * n
+        self.wrench_a = np.concatenate([f, _cross(ra, f) + moment], axis=1)
+        self.wrench_b = np.concatenate([-f, -_cross(rb, f) - moment], axis=1)
 
     def __len__(self) -> int:
         return len(self.models)
