@@ -44,8 +44,9 @@ other slides has stiffness only from how its contacts migrate over its surface a
 height changes: the moment the geometry leaves unbalanced drives it, as in the one-particle
 turn.
 
-All quantities SI, world frame; blocks are (6, 12) arrays: rows (force, moment) on a or b,
-columns (du_a, dφ_a, du_b, dφ_b).
+All quantities SI, world frame; a contact's blocks are (6, 12) arrays (stacked over the
+contacts in :class:`ModelStack`): rows (force, moment) on a or b, columns
+(du_a, dφ_a, du_b, dφ_b).
 """
 
 from __future__ import annotations
@@ -314,7 +315,6 @@ class ModelStack:
 
     def __init__(self, models: Sequence[ContactModel]) -> None:
         models = tuple(models)
-        self.models = models
         count = len(models)
         zero = np.zeros(3)
 
@@ -396,9 +396,6 @@ class ModelStack:
         moment = twist[:, None] * n
         self.wrench_a = np.concatenate([f, _cross(ra, f) + moment], axis=1)
         self.wrench_b = np.concatenate([-f, -_cross(rb, f) - moment], axis=1)
-
-    def __len__(self) -> int:
-        return len(self.models)
 
     def laws(self, ds: np.ndarray, dN: np.ndarray) -> TangentialLaws:
         """Each contact's branch of the tangential law at its predicted tangential displacement
