@@ -143,3 +143,57 @@ def test_the_stacked_law_blocks_are_the_forces_and_moments_of_the_laws():
                                    atol=1e-13 * np.abs(c_a[k]).max() + 1e-300)
         np.testing.assert_allclose(c_b[k], -np.concatenate([c, np.cross(rb, c)]), rtol=1e-13,
                                    atol=1e-13 * np.abs(c_b[k]).max() + 1e-300)
+
+
+def test_the_stacked_base_blocks_of_two_spheres_are_the_derivatives_of_their_wrench():
+    """Two touching spheres (radii R_a, R_b, centres along a random normal n) carry
+    F_a = −N n with N = N₀ + k_n δ, δ = R_a + R_b − |c_b − c_a|, at x_p = c_a + R_a n, and the
+    twist m n with m = k_w n·(φ_b − φ_a): their moments about the centres vanish at any pose
+    but for the twist (x_p − c_a and x_p − c_b lie along n). The base blocks (contact point
+    migrating over both curved surfaces, the normal turning) and the approach row against
+    central differences of that wrench under every rigid motion."""
+    rng = np.random.default_rng(11)
+    Ra, Rb, N0, kn = 1.0e-3, 0.6e-3, 0.8, 2.0e6
+    n0 = rng.standard_normal(3)
+    n0 /= np.linalg.norm(n0)
+    ca0 = rng.standard_normal(3) * 1e-3
+    cb0 = ca0 + (Ra + Rb) * n0
+    P = I3 - np.outer(n0, n0)
+    area = 2e-9
+    model = ContactModel.of(
+        normal=n0, point=ca0 + Ra * n0, centre_a=ca0, centre_b=cb0, normal_force=N0,
+        tangential_force=np.zeros(3), twist_moment=0.0, approach=1.5 * N0 / kn, area=area,
+        stick_area=area, mu=0.3, slip=np.zeros(3), compliance=5e-9, torsion=2.6e-9,
+        curvature_a=P / Ra, curvature_b=P / Rb, sliding=False)
+    stack = ModelStack([model])
+    k_twist = 16.0 / 3.0 * (area / np.pi) ** 1.5 / 2.6e-9
+
+    def wrenches(x):
+        ca, pa, cb, pb = x[:3] + ca0, x[3:6], x[6:9] + cb0, x[9:]
+        d = cb - ca
+        n = d / np.linalg.norm(d)
+        N = N0 + kn * (Ra + Rb - np.linalg.norm(d))
+        f = -N * n
+        m = k_twist * (n0 @ (pb - pa)) * n
+        xp = ca + Ra * n
+        return (np.concatenate([f, np.cross(xp - ca, f) + m]),
+                np.concatenate([-f, -np.cross(xp - cb, f) - m]),
+                Ra + Rb - np.linalg.norm(d))
+
+    steps = np.array([1e-9] * 3 + [1e-6] * 3 + [1e-9] * 3 + [1e-6] * 3)
+    fd_a, fd_b, fd_delta = np.zeros((6, 12)), np.zeros((6, 12)), np.zeros(12)
+    for j in range(12):
+        e = np.zeros(12)
+        e[j] = steps[j]
+        plus, minus = wrenches(e), wrenches(-e)
+        fd_a[:, j] = (plus[0] - minus[0]) / (2 * steps[j])
+        fd_b[:, j] = (plus[1] - minus[1]) / (2 * steps[j])
+        fd_delta[j] = (plus[2] - minus[2]) / (2 * steps[j])
+    # absolute tolerances by quadrant: force or moment rows, translation or rotation columns
+    rotation = np.repeat([False, True, False, True], 3)
+    atol = 1e-6 * np.where(rotation[None, :], np.array([[N0]] * 3 + [[N0 * Ra]] * 3),
+                           np.array([[kn]] * 3 + [[N0]] * 3))
+    for block, fd in ((stack.base_a[0], fd_a), (stack.base_b[0], fd_b)):
+        assert (np.abs(block - fd) <= atol + 1e-5 * np.abs(fd)).all(), block - fd
+    assert np.abs(fd_a[3:, 9:]).max() > 1e3 * atol[3:, 9:].max()        # the twist is seen
+    np.testing.assert_allclose(stack.approach_rows[0], fd_delta, rtol=1e-6, atol=1e-9)
