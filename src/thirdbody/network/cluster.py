@@ -99,7 +99,7 @@ from .broad import candidate_pairs
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
 from .narrow import closest_approach
 from .plate import PlateContact, solve_plate
-from .stiffness import ContactModel, TangentialLaw, cross
+from .stiffness import ContactModel, ModelStack, TangentialLaws, _cross, cross
 
 __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
            "ContactReport", "solve_cluster", "wrap"]
@@ -809,70 +809,91 @@ def _pair_model(c: PairContact, A: Body, B: Body, mu: float) -> ContactModel:
 
 # --- the Newton step -----------------------------------------------------------------------
 @dataclass
-class _Term:
-    """One contact in the linear model: a solved contact (``bem``) or an open one that a step
-    may close (a spring of the stiffness it would have at the force scale, separation
-    ``sigma``)."""
+class _Terms:
+    """The contacts of the linear model, stacked (m terms, the first axis of every array): the
+    solved contacts (``bem``) and the open ones that a step may close (a spring of the stiffness
+    it would have at the force scale, separation ``sigma``)."""
 
-    a: int
-    b: int | None                   # None: a plate
-    upper: bool
-    model: ContactModel
-    base_a: np.ndarray              # (6, 12)
+    a: np.ndarray                   # (m,) int
+    b: np.ndarray                   # (m,) int, −1: a plate
+    upper: np.ndarray               # (m,) bool: the upper plate
+    models: ModelStack
+    base_a: np.ndarray              # (m, 6, 12)
     base_b: np.ndarray
-    row: np.ndarray                 # (12,) the approach's change
-    trows: np.ndarray               # (3, 12) the tangential relative displacement
-    wrench_a: np.ndarray            # (6,) of the current force, or of −k σ for a spring
+    wrench_a: np.ndarray            # (m, 6) of the current force, or of −k σ for a spring
     wrench_b: np.ndarray
-    N: float
-    kn: float
-    sigma: float
-    bem: bool
-    reach: float = 0.0              # an open contact's Hertz approach at the force scale, m
+    N: np.ndarray                   # (m,)
+    kn: np.ndarray
+    sigma: np.ndarray
+    bem: np.ndarray                 # (m,) bool
+    reach: np.ndarray               # an open contact's Hertz approach at the force scale, m
+    #: (m, 4): the slots of the blocks (a, a), (a, b), (b, a), (b, b) (−1: none, a plate);
+    #: ``keys`` (slots, 2) their (row, column) particles
+    slots: np.ndarray
+    keys: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+    @property
+    def pair(self) -> np.ndarray:
+        return self.b >= 0
 
     def motion(self, step: np.ndarray, dh: float) -> np.ndarray:
-        """(du_a, dφ_a, du_b, dφ_b) of a step (the upper plate moves by dh along z)."""
-        out = np.zeros(12)
-        out[:6] = step[self.a]
-        if self.b is not None:
-            out[6:] = step[self.b]
-        elif self.upper:
-            out[8] = dh
+        """(m, 12): each term's (du_a, dφ_a, du_b, dφ_b) of a step (the upper plate moves by dh
+        along z)."""
+        out = np.zeros((len(self.a), 12))
+        out[:, :6] = step[self.a]
+        pair = self.pair
+        out[pair, 6:] = step[self.b[pair]]
+        out[self.upper, 8] = dh
         return out
 
+    def approach_change(self, step: np.ndarray, dh: float) -> tuple[np.ndarray, np.ndarray]:
+        """Each term's change of approach under a step (m,), m, and its motions (m, 12)."""
+        v = self.motion(step, dh)
+        return np.matmul(self.models.approach_rows[:, None, :], v[:, :, None])[:, 0, 0], v
 
-def _terms(problem: _Problem, ev: _Evaluation) -> list[_Term]:
-    terms = []
+
+def _terms(problem: _Problem, ev: _Evaluation) -> _Terms:
     scale = ev.scale if ev.scale > 0 else (problem.force or 0.0)
+    rows = []                       # (a, b, upper, model, N, k, σ, bem, reach)
     for c in ev.contacts:
         m = c.model
-        base_a, base_b = m.base_blocks()
-        wa, wb = m.wrenches()
         plate = isinstance(c.contact, PlateContact)
-        a, b = (c.key[0], None) if plate else c.roles
-        terms.append(_Term(a, b, plate and c.key[1] == "upper", m, base_a, base_b,
-                           m.approach_row(), m.tangential_rows(), wa, wb, m.normal_force,
-                           m.k_normal, 0.0, True))
-    if scale <= 0:
-        return terms
-    for p in ev.potential:
+        a, b = (c.key[0], -1) if plate else c.roles
+        rows.append((a, b, plate and c.key[1] == "upper", m, m.normal_force, m.k_normal, 0.0,
+                     True, 0.0))
+    for p in ev.potential if scale > 0 else ():
         # Hertz at the force scale: δ = (9 N² / (16 E*² R))^(1/3), k = 3N/(2δ)
         delta = (9.0 * scale**2 / (16.0 * p.E_star**2 * p.radius)) ** (1.0 / 3.0)
         k = 1.5 * scale / delta
         k0 = 8.0 * math.sqrt(p.radius * delta) / p.compliance if p.mu > 0 else 0.0
         m = ContactModel.spring(normal=p.normal, point=p.point, centre_a=p.centre_a,
                                 centre_b=p.centre_b, stiffness=k, tangential=k0, mu=p.mu)
-        base_a, base_b = m.base_blocks()
-        f = k * p.sigma * m.normal                  # −N n with N = −k σ
-        ra, rb = m.arms
-        wa = np.concatenate([f, cross(ra, f)])
-        wb = np.concatenate([-f, -cross(rb, f)])
         plate = p.roles[1] in PLATES
-        a, b = (p.roles[0], None) if plate else p.roles
-        terms.append(_Term(a, b, plate and p.roles[1] == "upper", m, base_a, base_b,
-                           m.approach_row(), m.tangential_rows(), wa, wb, 0.0, k, p.sigma,
-                           False, delta))
-    return terms
+        a, b = (p.roles[0], -1) if plate else p.roles
+        rows.append((a, b, plate and p.roles[1] == "upper", m, 0.0, k, p.sigma, False, delta))
+    count = len(rows)
+    models = ModelStack([r[3] for r in rows])
+    a = np.array([r[0] for r in rows], dtype=int)
+    b = np.array([r[1] for r in rows], dtype=int)
+    slots = np.full((count, 4), -1, dtype=int)
+    keys: dict = {}
+    for m, (r, q) in enumerate(zip(a.tolist(), b.tolist(), strict=True)):
+        for j, key in enumerate(((r, r), (r, q), (q, r), (q, q)) if q >= 0 else ((r, r),)):
+            slots[m, j] = keys.setdefault(key, len(keys))
+    N, kn, sigma, bem, reach = (np.array([r[j] for r in rows], dtype=float).reshape(count)
+                                for j in range(4, 9))
+    bem = bem.astype(bool)
+    # an open contact's wrench: of −N n with N = −k σ
+    f = (kn * sigma)[:, None] * models.normal
+    spring_a = np.concatenate([f, _cross(models.arm_a, f)], axis=1)
+    spring_b = np.concatenate([-f, -_cross(models.arm_b, f)], axis=1)
+    return _Terms(a, b, np.array([r[2] for r in rows], dtype=bool), models, models.base_a,
+                  models.base_b, np.where(bem[:, None], models.wrench_a, spring_a),
+                  np.where(bem[:, None], models.wrench_b, spring_b), N, kn, sigma, bem, reach,
+                  slots, np.array(list(keys), dtype=int).reshape(len(keys), 2))
 
 
 def _components(n: int, pairs: list[tuple[int, int]]) -> list[list[int]]:
@@ -944,7 +965,9 @@ _ACTIVE_SET_PASSES = 12
 class _Model:
     """The linear model of the residuals with a given set of active terms."""
 
-    blocks: dict                    # (row particle, col particle) -> (6, 6)
+    rows: np.ndarray                # (s,) int: the blocks' row particles
+    cols: np.ndarray                # (s,) int: their column particles
+    blocks: np.ndarray              # (s, 6, 6)
     constant: np.ndarray            # (n, 6): the residual's change at a zero step
     h_col: np.ndarray               # (n, 6)
     h_row: np.ndarray               # (n, 6)
@@ -953,62 +976,72 @@ class _Model:
 
     def residual(self, R: np.ndarray, plate: float, step: np.ndarray, dh: float):
         out = R + self.constant + self.h_col * dh
-        for (r, c), blk in self.blocks.items():
-            out[r] += blk @ step[c]
+        np.add.at(out, self.rows, np.matmul(self.blocks, step[self.cols][:, :, None])[:, :, 0])
         plate_out = plate + self.plate_constant + math.fsum((self.h_row * step).ravel()) + \
             self.h_diag * dh
         return out, plate_out
 
 
-def _model(n: int, terms: list[_Term], active: list[bool], laws: list,
+def _ordered_sum(values: np.ndarray) -> float:
+    """The sum of ``values`` added one after the other (as a loop would)."""
+    return float(np.cumsum(values)[-1]) if values.size else 0.0
+
+
+def _model(n: int, terms: _Terms, active: np.ndarray, laws: TangentialLaws,
            correction: dict | None = None) -> _Model:
-    blocks: dict = {}
+    """The linear model of the active terms on their laws' branches. Every sum over terms adds
+    them in the terms' order (``np.add.at`` is sequential), as the loop over terms that this
+    replaced did: the same model bit for bit."""
+    on = np.asarray(active, dtype=bool)
+    pair, bem = terms.pair, terms.bem
+    la, lb, ca, cb = terms.models.law_blocks(laws)
+    block_a, block_b = terms.base_a + la, terms.base_b + lb
+    # the constant, term after term: a solved contact that the step opens loses its force;
+    # an active term adds its law's offset, an active spring its force −k σ
+    gone = bem & ~on
+    first = on | bem
+    values = np.stack([np.where(gone[:, None], -terms.wrench_a, ca),
+                       np.where(gone[:, None], -terms.wrench_b, cb),
+                       terms.wrench_a, terms.wrench_b], axis=1)
+    valid = np.stack([first, first & pair, on & ~bem, on & ~bem & pair], axis=1)
+    where = np.stack([terms.a, terms.b, terms.a, terms.b], axis=1)
     constant = np.zeros((n, 6))
+    np.add.at(constant, where[valid], values[valid])
+    upper = terms.upper
+    plate_constant = _ordered_sum(np.where(gone, -terms.N, -(terms.kn * terms.sigma))[
+        upper & (gone | (on & ~bem))])
+    # the blocks, in the order the terms first touch them
+    contributions = np.stack([block_a[:, :, :6], block_a[:, :, 6:], block_b[:, :, :6],
+                              block_b[:, :, 6:]], axis=1)
+    valid = on[:, None] & np.stack([np.ones_like(pair), pair, pair, pair], axis=1)
+    slots = terms.slots[valid]
+    used, first_use = np.unique(slots, return_index=True)
+    order = used[np.argsort(first_use)]
+    position = np.empty(len(terms.keys), dtype=int)
+    position[order] = np.arange(len(order))
+    blocks = np.zeros((len(order), 6, 6))
+    np.add.at(blocks, position[slots], contributions[valid])
+    rows, cols = terms.keys[order, 0], terms.keys[order, 1]
+    # the upper plate's gap: its column, the row of its force and the diagonal
+    lid = on & upper
     h_col = np.zeros((n, 6))
+    np.add.at(h_col, terms.a[lid], block_a[lid, :, 8])
     h_row = np.zeros((n, 6))
-    h_diag = 0.0
-    plate_constant = 0.0
-
-    def add(r, c, blk):
-        if (r, c) in blocks:
-            blocks[(r, c)] = blocks[(r, c)] + blk
-        else:
-            blocks[(r, c)] = blk.copy()
-
-    for t, on, law in zip(terms, active, laws, strict=True):
-        if t.bem and not on:
-            # the contact opens under the step: its force goes
-            constant[t.a] -= t.wrench_a
-            if t.b is not None:
-                constant[t.b] -= t.wrench_b
-            elif t.upper:
-                plate_constant -= t.N
-            continue
-        if not on:
-            continue
-        la, lb, ca, cb = t.model.law_blocks(law)
-        block_a, block_b = t.base_a + la, t.base_b + lb
-        constant[t.a] += ca
-        if t.b is not None:
-            constant[t.b] += cb
-        if not t.bem:
-            constant[t.a] += t.wrench_a
-            if t.b is not None:
-                constant[t.b] += t.wrench_b
-            elif t.upper:
-                plate_constant -= t.kn * t.sigma
-        add(t.a, t.a, block_a[:, :6])
-        if t.b is not None:
-            add(t.a, t.b, block_a[:, 6:])
-            add(t.b, t.a, block_b[:, :6])
-            add(t.b, t.b, block_b[:, 6:])
-        elif t.upper:
-            h_col[t.a] += block_a[:, 8]
-            h_row[t.a] += t.kn * t.row[:6]
-            h_diag += t.kn * t.row[8]
-    for key, blk in (correction or {}).items():
-        add(*key, blk)
-    return _Model(blocks, constant, h_col, h_row, h_diag, plate_constant)
+    np.add.at(h_row, terms.a[lid], terms.kn[lid, None] * terms.models.approach_rows[lid, :6])
+    h_diag = _ordered_sum(terms.kn[lid] * terms.models.approach_rows[lid, 8])
+    if correction:
+        found = {(int(r), int(c)): m for m, (r, c) in enumerate(zip(rows, cols, strict=True))}
+        extra = []
+        for key, blk in correction.items():
+            if key in found:
+                blocks[found[key]] = blocks[found[key]] + blk
+            else:
+                extra.append((key, blk))
+        if extra:
+            rows = np.concatenate([rows, [k[0] for k, _ in extra]]).astype(int)
+            cols = np.concatenate([cols, [k[1] for k, _ in extra]]).astype(int)
+            blocks = np.concatenate([blocks, [blk for _, blk in extra]])
+    return _Model(rows, cols, blocks, constant, h_col, h_row, h_diag, plate_constant)
 
 
 def _solve_model(problem: _Problem, model: _Model, R: np.ndarray, plate: float,
@@ -1029,21 +1062,25 @@ def _solve_model(problem: _Problem, model: _Model, R: np.ndarray, plate: float,
     x = np.zeros((n, 6))
     y = np.zeros((n, 6))
     target = R + model.constant
-    by_row: dict[int, list] = {}
-    for (r, c), blk in model.blocks.items():
-        by_row.setdefault(r, []).append((c, blk))
-    groups = _components(n, [key for key in model.blocks if key[0] != key[1]])
-    for group in groups:
-        index = {k: m for m, k in enumerate(group)}
+    rows, cols = model.rows, model.cols
+    scaled = row_scale[rows][:, :, None] * model.blocks * col_scale[cols][:, None, :]
+    off = rows != cols
+    groups = _components(n, list(zip(rows[off].tolist(), cols[off].tolist(), strict=True)))
+    label = np.empty(n, dtype=int)
+    local = np.empty(n, dtype=int)
+    for g, group in enumerate(groups):
+        label[group] = g
+        local[group] = np.arange(len(group))
+    by_group = np.argsort(label[rows], kind="stable")
+    bounds = np.searchsorted(label[rows][by_group], np.arange(len(groups) + 1))
+    for g, group in enumerate(groups):
         size = 6 * len(group)
         J = np.zeros((size, size))
-        for k in group:
-            for c, blk in sorted(by_row.get(k, []), key=lambda cb: cb[0]):
-                m, q = index[k], index[c]
-                J[6 * m:6 * m + 6, 6 * q:6 * q + 6] += \
-                    row_scale[k][:, None] * blk * col_scale[c][None, :]
-        rhs = np.concatenate([-target[k] * row_scale[k] for k in group])
-        hcol = np.concatenate([model.h_col[k] * row_scale[k] for k in group])
+        mine = by_group[bounds[g]:bounds[g + 1]]
+        J.reshape(len(group), 6, len(group), 6)[local[rows[mine]], :, local[cols[mine]], :] \
+            += scaled[mine]
+        rhs = (-target[group] * row_scale[group]).ravel()
+        hcol = (model.h_col[group] * row_scale[group]).ravel()
         keep = np.arange(size)
         if translate:
             keep = keep[keep % 6 < 3]
@@ -1055,10 +1092,8 @@ def _solve_model(problem: _Problem, model: _Model, R: np.ndarray, plate: float,
             xs[keep], ys[keep] = sol[:, 0], sol[:, 1]
         else:
             xs[keep] = _least_norm(J, rhs)
-        for k in group:
-            m = index[k]
-            x[k] = xs[6 * m:6 * m + 6] * col_scale[k]
-            y[k] = ys[6 * m:6 * m + 6] * col_scale[k]
+        x[group] = xs.reshape(-1, 6) * col_scale[group]
+        y[group] = ys.reshape(-1, 6) * col_scale[group]
     dh = 0.0
     if force_control:
         # Σ_k h_row_k · (x_k − y_k dh) + h_diag dh = −(ΣN − F + constant)
@@ -1069,68 +1104,49 @@ def _solve_model(problem: _Problem, model: _Model, R: np.ndarray, plate: float,
     return x - y * dh, dh
 
 
-def _approach_change(t: _Term, step: np.ndarray, dh: float) -> float:
-    return float(t.row @ t.motion(step, dh))
-
-
 #: a solved contact stays closed (at zero force) when the step takes its modelled force to zero
 #: within this share of its force: the rounding of the kink at which the normal law opens
 _KINK = 1e-9
 
 
-def _statuses(terms: list[_Term], step: np.ndarray, dh: float) -> tuple[list, list]:
-    """Each term's normal status (in contact after the step) and tangential branch, from the
-    predicted motion. A solved contact that the step unloads exactly to zero (the root of a
-    particle lifting off its only contact: N + k_n dδ = 0 to rounding, :data:`_KINK`) stays
-    closed: open, it would leave its particle without stiffness, whose minimum-norm step is
-    then no lift at all (12 spheres in an 8 mm box: a sphere pressed 0.5 µm into the lower
+def _statuses(terms: _Terms, step: np.ndarray, dh: float) -> tuple[np.ndarray,
+                                                                  TangentialLaws]:
+    """Each term's normal status (in contact after the step, (m,) bool) and tangential branch,
+    from the predicted motion. A solved contact that the step unloads exactly to zero (the root
+    of a particle lifting off its only contact: N + k_n dδ = 0 to rounding, :data:`_KINK`)
+    stays closed: open, it would leave its particle without stiffness, whose minimum-norm step
+    is then no lift at all (12 spheres in an 8 mm box: a sphere pressed 0.5 µm into the lower
     plate with nothing above, N + dN = −3 × 10⁻¹⁸ N at the root, its step zeroed pass after
     pass)."""
-    active, laws = [], []
-    for t in terms:
-        v = t.motion(step, dh)
-        d = float(t.row @ v)
-        if t.bem:
-            dN = t.kn * d
-            active.append(t.N + dN > -_KINK * t.N)
-        else:
-            dN = t.kn * (d - t.sigma)
-            active.append(dN > 0)
-        laws.append(t.model.tangential_law(t.trows @ v, dN))
-    return active, laws
+    d, v = terms.approach_change(step, dh)
+    bem = terms.bem
+    dN = np.where(bem, terms.kn * d, terms.kn * (d - terms.sigma))
+    active = np.where(bem, terms.N + dN > -_KINK * terms.N, dN > 0)
+    ds = np.matmul(terms.models.tangential_rows, v[:, :, None])[:, :, 0]
+    return active, terms.models.laws(ds, dN)
 
 
 #: sliding contacts start the active-set passes of a Newton step on their stick branch
 _STICK_FIRST = True
 
 
-def _elastic(model: ContactModel) -> TangentialLaw:
-    """The stick branch of a sliding contact's tangential law, stiffness k₀: the elastic
-    predictor from the start of the step (:meth:`ContactModel.elastic_law`)."""
-    return model.elastic_law()
+def _same(laws_a: TangentialLaws, laws_b: TangentialLaws) -> bool:
+    """The same branches: stick or slide, and a slide branch along the same direction."""
+    if not np.array_equal(laws_a.slide, laws_b.slide):
+        return False
+    x, y = laws_a.g[laws_a.slide], laws_b.g[laws_a.slide]
+    atol = 1e-12 * (np.abs(x).max(axis=1, initial=0.0) + 1e-300)
+    return bool((np.abs(x - y) <= atol[:, None] + 1e-6 * np.abs(y)).all())
 
 
-def _same(laws_a: list, laws_b: list) -> bool:
-    for x, y in zip(laws_a, laws_b, strict=True):
-        if x.state != y.state:
-            return False
-        if x.state == "slide" and not np.allclose(x.g, y.g, rtol=1e-6, atol=1e-12 * (
-                float(np.abs(x.g).max()) + 1e-300)):
-            return False
-    return True
-
-
-def _keep_plate_loaded(problem: _Problem, terms: list[_Term], active: list) -> None:
+def _keep_plate_loaded(problem: _Problem, terms: _Terms, active: np.ndarray) -> None:
     """Under force control, while no contact presses the upper plate its open contacts stay
     active (the plate must come down to them)."""
-    if problem.force is not None and not any(a for t, a in zip(terms, active, strict=True)
-                                             if t.upper):
-        for m, t in enumerate(terms):
-            if t.upper and not t.bem:
-                active[m] = True
+    if problem.force is not None and not active[terms.upper].any():
+        active[terms.upper & ~terms.bem] = True
 
 
-def _piecewise(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: float,
+def _piecewise(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
                step: np.ndarray, dh: float):
     """The piecewise-linear model at a step: each contact on the status and branch the step
     puts it on (:func:`_statuses`), each branch linearised there, so that the model's residual
@@ -1158,19 +1174,19 @@ _MODEL_HALVINGS, _OTHER_HALVINGS = 30, 8
 _MODEL_ROOT = 1e-14
 
 
-def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: float,
+def _newton_step(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
                  scale: float, translate: bool = False):
     """The model's step with an active set of contacts: a solved contact whose normal force
     the step would take below zero opens (its force goes, it has no stiffness), an open one
     that the step would close acts with its spring, and each contact's tangential law takes the
     branch (stick, or slide along the trial force) the predicted motion puts it on
-    (:meth:`ContactModel.tangential_law`); repeated until the set settles (a semismooth Newton
-    step on the piecewise-linear model). Each pass must lower the model's merit (scaled by
-    ``scale``, N) at its own branches (:func:`_piecewise`), else its step is halved towards
-    the last one: on a saturating law (a contact that slid in the step, whose force stays μN
-    until the motion takes its slip back) the undamped passes cycle between the plateau and
-    beyond it. Under force control, while no contact presses the upper plate its open
-    contacts stay active. Returns (step, dh, model, active)."""
+    (:meth:`~thirdbody.network.stiffness.ModelStack.laws`); repeated until the set settles (a
+    semismooth Newton step on the piecewise-linear model). Each pass must lower the model's
+    merit (scaled by ``scale``, N) at its own branches (:func:`_piecewise`), else its step is
+    halved towards the last one: on a saturating law (a contact that slid in the step, whose
+    force stays μN until the motion takes its slip back) the undamped passes cycle between the
+    plateau and beyond it. Under force control, while no contact presses the upper plate its
+    open contacts stay active. Returns (step, dh, model, active)."""
     n = problem.n
     step, dh = np.zeros((n, 6)), 0.0
     out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate, step, dh)
@@ -1182,15 +1198,14 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
     # passes below put it back on the slide branch if the step goes on along the slip
     start_laws = laws
     if _STICK_FIRST:
-        start_laws = [_elastic(t.model) if t.model.sliding and law.state == "slide" else law
-                      for t, law in zip(terms, laws, strict=True)]
+        start_laws = laws.where(terms.models.sliding & laws.slide, terms.models.elastic())
     # an open contact closer than its approach at the force scale starts active: a particle
     # pressed towards a neighbour it does not touch yet has no other support in the model (the
     # pass below opens it again if the step does not close it)
-    start_active = [t.bem or t.sigma <= t.reach for t in terms]
+    start_active = terms.bem | (terms.sigma <= terms.reach)
     _keep_plate_loaded(problem, terms, start_active)
     used = (start_active, start_laws)
-    own = start_active == active and _same(start_laws, laws)
+    own = np.array_equal(start_active, active) and _same(start_laws, laws)
     trial, trial_dh = _solve_model(problem, _model(n, terms, start_active, start_laws,
                                                           problem.correction),
                                    R, plate, translate)
@@ -1215,7 +1230,7 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
             continue
         step, dh, merit = cand, cand_dh, cand_merit
         model, active, laws = cand_model, cand_active, cand_laws
-        if t == 1.0 and cand_active == used[0] and _same(cand_laws, used[1]):
+        if t == 1.0 and np.array_equal(cand_active, used[0]) and _same(cand_laws, used[1]):
             break           # the step's own branches: the piecewise model's root
         if merit <= _MODEL_ROOT * start_merit:
             break           # the piecewise model's root to rounding
@@ -1232,11 +1247,9 @@ def _newton_step(problem: _Problem, terms: list[_Term], R: np.ndarray, plate: fl
         # has: a pressed sphere pushed out of its contacts by their force (its step is the
         # way out, and zeroing it stalled 25 pressed spheres at their first step)
         touched = np.zeros(n, dtype=bool)
-        for t, on in zip(terms, active, strict=True):
-            if on or t.bem:
-                touched[t.a] = True
-                if t.b is not None:
-                    touched[t.b] = True
+        acting = active | terms.bem
+        touched[terms.a[acting]] = True
+        touched[terms.b[acting & terms.pair]] = True
         if step[~touched].any():
             step = step.copy()
             step[~touched] = 0.0
@@ -1268,8 +1281,8 @@ def _contact_keys(contacts, n: int) -> list[set]:
     return keys
 
 
-def _learn(problem: _Problem, ev: _Evaluation, trial: _Evaluation, terms: list[_Term],
-           active: list[bool], laws: list, R: np.ndarray, R_trial: np.ndarray,
+def _learn(problem: _Problem, ev: _Evaluation, trial: _Evaluation, terms: _Terms,
+           active: np.ndarray, laws: TangentialLaws, R: np.ndarray, R_trial: np.ndarray,
            predicted: np.ndarray, step: np.ndarray, rows: np.ndarray) -> bool:
     """Correct each particle's own block of the linear model by what a trial's BEM residuals
     showed (Broyden's good update of the 6 x 6 diagonal block, row by row as in Schubert's
@@ -1299,11 +1312,14 @@ def _learn(problem: _Problem, ev: _Evaluation, trial: _Evaluation, terms: list[_
     ok = [bool(rows[k]) and bool(before[k]) and before[k] == after[k] for k in range(n)]
     sliding = {c.key: c.model.sliding for c in trial.contacts}
     keys = [c.key for c in ev.contacts] + [None] * (len(terms) - len(ev.contacts))
-    for t, on, law, key in zip(terms, active, laws, keys, strict=True):
-        if on != t.bem or (key is not None and sliding.get(key) != (law.state == "slide")):
-            ok[t.a] = False
-            if t.b is not None:
-                ok[t.b] = False
+    changed_state = np.asarray(active) != terms.bem
+    for m, key in enumerate(keys):
+        if key is not None and sliding.get(key) != bool(laws.slide[m]):
+            changed_state[m] = True
+    for m in np.flatnonzero(changed_state):
+        ok[terms.a[m]] = False
+        if terms.b[m] >= 0:
+            ok[terms.b[m]] = False
     mismatch = R_trial - predicted
     change = R_trial - R
     # ŝ = (du, L dφ): |ŝ|² = s · (weight s); residuals scaled as (F, M / L)
@@ -1375,7 +1391,7 @@ def _force_residual(problem: _Problem, ev: _Evaluation, scale: float) -> float:
 _ROTATION, _TRANSLATION, _FORCE = 0.05, 0.05, 1.0
 
 
-def _limit(problem: _Problem, terms: list[_Term], active: list[bool], scale: float,
+def _limit(problem: _Problem, terms: _Terms, active: np.ndarray, scale: float,
            step: np.ndarray, dh: float, radius: float):
     """The step scaled as a whole (one factor for every particle and the plate: the direction
     and any symmetry are kept) so that at trust radius ρ no particle turns by more than
@@ -1390,14 +1406,12 @@ def _limit(problem: _Problem, terms: list[_Term], active: list[bool], scale: flo
             factor = min(factor, radius * _ROTATION / rot)
         if trans > radius * _TRANSLATION:
             factor = min(factor, radius * _TRANSLATION / trans)
-    for t, on in zip(terms, active, strict=True):
-        if not on:
-            continue
-        d = _approach_change(t, step, dh)
-        change = abs(t.kn * d) if t.bem else t.kn * max(d - t.sigma, 0.0)
-        allowed = radius * _FORCE * max(t.N, scale)
-        if change > allowed:
-            factor = min(factor, allowed / change)
+    d, _ = terms.approach_change(step, dh)
+    change = np.where(terms.bem, np.abs(terms.kn * d), terms.kn * np.maximum(d - terms.sigma, 0.0))
+    allowed = radius * _FORCE * np.maximum(terms.N, scale)
+    over = np.asarray(active, dtype=bool) & (change > allowed)
+    if over.any():
+        factor = min(factor, float((allowed[over] / change[over]).min()))
     if factor < 1.0:
         return step * factor, dh * factor, True
     return step, dh, False

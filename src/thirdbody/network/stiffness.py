@@ -33,7 +33,7 @@ ds = P dt (P = I − n nᵀ). The contact law, modelled from the last BEM solve:
   partial slip the force also grows with N at a fixed shift (the contact grows): Cattaneo-
   Mindlin's dT/dN (:meth:`ContactModel._stick_normal`). The caller (the active set of
   :mod:`~thirdbody.network.cluster`) picks the branch from the predicted motion and
-  linearises it there (:meth:`ContactModel.tangential_law`);
+  linearises it there (:meth:`ModelStack.laws`);
 * twist: dm = k_w n·dψ with Lubkin's (16/3) a³/Σ(1/G_i) times (c/a)³ (0 while sliding);
 
 and the geometry of the rigid bodies (Montana's contact kinematics, to first order): relative to
@@ -44,19 +44,20 @@ other slides has stiffness only from how its contacts migrate over its surface a
 height changes: the moment the geometry leaves unbalanced drives it, as in the one-particle
 turn.
 
-All quantities SI, world frame; blocks are (6, 12) arrays: rows (force, moment) on a or b,
-columns (du_a, dφ_a, du_b, dφ_b).
+All quantities SI, world frame; a contact's blocks are (6, 12) arrays (stacked over the
+contacts in :class:`ModelStack`): rows (force, moment) on a or b, columns
+(du_a, dφ_a, du_b, dφ_b).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from functools import cached_property
 
 import numpy as np
 
-__all__ = ["ContactModel", "TangentialLaw", "skew"]
+__all__ = ["ContactModel", "ModelStack", "TangentialLaws", "skew"]
 
 #: a stick contact's tangential stiffness is its partial-slip tangent both ways (False: k0 for a
 #: motion back from the current iterate, the former choice)
@@ -81,19 +82,22 @@ def cross(u, v) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class TangentialLaw:
-    """A linearised branch of the tangential law: T_model = T + stiffness ds + g dN + offset,
-    with ``stiffness`` (3, 3), ``g`` (3,) and ``offset`` (3,) world, SI; ``state`` "stick" or
-    "slide"."""
+class TangentialLaws:
+    """Linearised branches of the tangential laws of m contacts (:meth:`ModelStack.laws`):
+    T_model = T + stiffness ds + g dN + offset per contact, with ``stiffness`` (m, 3, 3), ``g``
+    (m, 3) and ``offset`` (m, 3) world, SI; ``slide`` (m,) bool: the slide branch (else stick)."""
 
     stiffness: np.ndarray
     g: np.ndarray
     offset: np.ndarray
-    state: str
+    slide: np.ndarray
 
-
-#: the tangential laws whose blocks a contact model keeps (:meth:`ContactModel.law_blocks`)
-_LAW_CACHE = 64
+    def where(self, mask: np.ndarray, other: TangentialLaws) -> TangentialLaws:
+        """These laws with ``other``'s where ``mask`` (m,) is true."""
+        return TangentialLaws(np.where(mask[:, None, None], other.stiffness, self.stiffness),
+                              np.where(mask[:, None], other.g, self.g),
+                              np.where(mask[:, None], other.offset, self.offset),
+                              np.where(mask, other.slide, self.slide))
 
 
 @dataclass(frozen=True)
@@ -228,158 +232,6 @@ class ContactModel:
     def sliding(self) -> bool:
         return self.slip_direction is not None
 
-    @property
-    def force_on_a(self) -> np.ndarray:
-        return -self.normal_force * self.normal + self.tangential_force
-
-    @property
-    def arms(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.point - self.centre_a, self.point - self.centre_b
-
-    def relative_rows(self) -> np.ndarray:
-        """dt (3, 12): b's material point at x_p relative to a's, for (du_a, dφ_a, du_b, dφ_b)."""
-        ra, rb = self.arms
-        return np.hstack([-_I, skew(ra), _I, -skew(rb)])
-
-    def approach_row(self) -> np.ndarray:
-        """dδ (12,) (:attr:`_approach_row`; computed once per model, not to be modified)."""
-        return self._approach_row
-
-    def tangential_rows(self) -> np.ndarray:
-        """The shift increment's change (3, 12) (:attr:`_tangential_rows`; computed once per
-        model, not to be modified)."""
-        return self._tangential_rows
-
-    def _geometry(self):
-        """(ξ, dn, dr_a, dr_b) (:attr:`_geometry_rows`; computed once per model)."""
-        return self._geometry_rows
-
-    @cached_property
-    def _approach_row(self) -> np.ndarray:
-        """dδ (12,): the relative normal motion at the point of first touch (``touch``, the
-        closest points of the undeformed surfaces; the pressure centroid if not given): by the
-        envelope theorem the closest points' own migration does not change the separation to
-        first order. (The pressure centroid lies a fraction of a cell away, which matters
-        where the motions of a step nearly cancel in the approach: a rotation of the particle
-        against the plates' motion.)"""
-        if self.touch is None:
-            return -(self.normal @ self.relative_rows())
-        ra = self.touch - self.centre_a
-        rb = self.touch - self.centre_b
-        dt = np.hstack([-_I, skew(ra), _I, -skew(rb)])
-        return -(self.normal @ dt)
-
-    @cached_property
-    def _tangential_rows(self) -> np.ndarray:
-        """The shift increment's change (3, 12). Without the step's kinematics, ds = P dt.
-        With them (:meth:`stepping`): the evaluated increment is
-        Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at the
-        middle of the step, so ds = f P [dt(r̄) + ½ Δφ_b × dr_b − ½ Δφ_a × dr_a], dr the
-        levers' change (the contact point migrates)."""
-        n = self.normal
-        P = _I - np.outer(n, n)
-        if self.mid_a is None:
-            return P @ self.relative_rows()
-        dt = np.hstack([-_I, skew(self.mid_a), _I, -skew(self.mid_b)])
-        _, _, d_ra, d_rb = self._geometry()
-        dt = dt + 0.5 * (skew(self.turn_b) @ d_rb - skew(self.turn_a) @ d_ra)
-        return self.fraction * (P @ dt)
-
-    @cached_property
-    def _geometry_rows(self):
-        """(ξ, dn, dr_a, dr_b) as (3, 12) arrays: the contact point's migration over a, the
-        normal's turn and the levers' changes (module docstring)."""
-        n = self.normal
-        P = _I - np.outer(n, n)
-        ra, _ = self.arms
-        ua = np.hstack([_I, _O, _O, _O])
-        pa = np.hstack([_O, _I, _O, _O])
-        ub = np.hstack([_O, _O, _I, _O])
-        dt = self.relative_rows()
-        dpsi = np.hstack([_O, -_I, _O, _I])
-        H = P @ (self.curvature_a + self.curvature_b) @ P
-        Hplus = np.linalg.pinv(H, rcond=1e-9, hermitian=True)
-        xi = Hplus @ (self.curvature_b @ P @ dt - skew(n) @ dpsi)
-        dn = P @ (-skew(n) @ pa + self.curvature_a @ xi)
-        d_ra = -skew(ra) @ pa + xi
-        d_rb = ua - skew(ra) @ pa + xi - ub
-        return xi, dn, d_ra, d_rb
-
-    def wrenches(self) -> tuple[np.ndarray, np.ndarray]:
-        """The (6,) wrenches (force, moment about the centroid) on a and on b of the contact's
-        current force and twist."""
-        f = self.force_on_a
-        ra, rb = self.arms
-        m = self.twist_moment * self.normal
-        return (np.concatenate([f, cross(ra, f) + m]),
-                np.concatenate([-f, -cross(rb, f) - m]))
-
-    def base_blocks(self) -> tuple[np.ndarray, np.ndarray]:
-        """The (6, 12) blocks d(F_a, M_a), d(F_b, M_b) of everything but the tangential law:
-        the normal force's change, the rigid geometry (the normal turns, the point migrates, T
-        stays in the tangent plane) and the twist."""
-        n = self.normal
-        ra, rb = self.arms
-        f = self.force_on_a
-        N, T, m = self.normal_force, self.tangential_force, self.twist_moment
-        dpsi = np.hstack([_O, -_I, _O, _I])
-        # the contact point migrates over a (Montana) and the normal turns
-        _, dn, d_ra, d_rb = self._geometry()
-        dN = self.k_normal * self.approach_row()
-        df = -np.outer(n, dN) - N * dn - np.outer(n, T @ dn)
-        dm = self.k_twist * (n @ dpsi)
-        dMa = -skew(f) @ d_ra + skew(ra) @ df + np.outer(n, dm) + m * dn
-        dMb = skew(f) @ d_rb - skew(rb) @ df - np.outer(n, dm) - m * dn
-        return np.vstack([df, dMa]), np.vstack([-df, dMb])
-
-    def tangential_law(self, ds: np.ndarray, dN: float) -> TangentialLaw:
-        """The branch of the tangential law at the predicted tangential displacement ``ds``
-        (3,) and normal force change ``dN``, linearised there (module docstring)."""
-        P = self._projector
-        T = self.tangential_force
-        zero = np.zeros(3)
-        if self.mu <= 0 or self.k_stick <= 0:
-            return TangentialLaw(np.zeros((3, 3)), zero, zero, "slide")
-        limit = self.mu * max(self.normal_force + dN, 0.0)
-        if self.sliding and float(ds @ self.slip_direction) >= 0:
-            d = self.slip_direction
-            return TangentialLaw(self.k_across * (P - np.outer(d, d)), self.mu * d,
-                                 self.mu * self.normal_force * d - T, "slide")
-        # a contact with stick cells: the tangent of its partial slip, whichever way the step
-        # goes (the BEM solves the step as one increment from its start, so a motion back
-        # from the current iterate is less loading in the step, not an unloading; measured
-        # on a tilted potato at |T|/muN = 0.9: dR/dx the same for +-1 nm, +-1e-6 rad)
-        loading = not self.sliding and (_TANGENT_BOTH_WAYS or float(ds @ T) > 0)
-        k = self.k_loading if loading else self.k_stick
-        g = self._stick_normal() if not self.sliding else zero
-        # a sliding contact's force is the return to the cone of the elastic predictor from
-        # the start of the step, T₀ + k₀ Δs = T + k₀ s_slip: the BEM solves one increment
-        # from there, so a reversal first takes back the step's slip at μN before it unloads
-        back = self.slipped if self.sliding and self.slipped is not None else zero
-        trial = T + k * (ds + back) + g * dN
-        size = float(np.linalg.norm(trial))
-        if size <= limit or size == 0:
-            return TangentialLaw(k * P, g, k * back, "stick")
-        d = trial / size
-        across = self.mu * self.normal_force / size * k * (P - np.outer(d, d))
-        value = self.mu * self.normal_force * d - across @ ds
-        return TangentialLaw(across, self.mu * d, value - T, "slide")
-
-    def elastic_law(self) -> TangentialLaw:
-        """The stick branch of a sliding contact's law (where a Newton step starts it): the
-        elastic predictor from the start of the step, T + k₀ (ds + s_slip) (module
-        docstring); for a contact with stick cells, from its current force, T + k₀ ds."""
-        P = self._projector
-        zero = np.zeros(3)
-        back = self.slipped if self.sliding and self.slipped is not None else zero
-        return TangentialLaw(self.k_stick * P, zero, self.k_stick * back, "stick")
-
-    @cached_property
-    def _projector(self) -> np.ndarray:
-        """I − n nᵀ (3, 3): onto the tangent plane (computed once per model, not to be
-        modified)."""
-        return _I - np.outer(self.normal, self.normal)
-
     def _stick_normal(self) -> np.ndarray:
         """dT/dN at a fixed shift of a contact in partial slip (3,): Cattaneo-Mindlin's
         T = μN [1 − (1 − u)^(3/2)] with u = s/s*, s* ∝ N^(2/3), gives
@@ -393,41 +245,221 @@ class ContactModel:
         u = 1.0 - (1.0 - q) ** (2.0 / 3.0)
         return self.mu * (q - u * (1.0 - q) ** (1.0 / 3.0)) * T / size
 
-    def law_blocks(self, law: TangentialLaw) -> tuple[np.ndarray, np.ndarray, np.ndarray,
-                                                      np.ndarray]:
-        """The (6, 12) blocks of a tangential law's dT and the (6,) wrenches of its offset, on a
-        and on b (not to be modified: a law met again, as a stick branch is at every pass of a
-        Newton step's active set, returns the arrays computed the first time)."""
-        key = (law.stiffness.tobytes(), law.g.tobytes(), law.offset.tobytes())
-        cache = self._law_cache
-        hit = cache.get(key)
-        if hit is not None:
-            return hit
-        ra, rb = self.arms
-        dT = law.stiffness @ self.tangential_rows() + \
-            np.outer(law.g, self.k_normal * self.approach_row())
-        on_a = np.vstack([dT, skew(ra) @ dT])
-        on_b = -np.vstack([dT, skew(rb) @ dT])
-        c = law.offset
-        out = (on_a, on_b, np.concatenate([c, cross(ra, c)]), -np.concatenate([c, cross(rb, c)]))
-        if len(cache) < _LAW_CACHE:
-            cache[key] = out
-        return out
 
-    @cached_property
-    def _law_cache(self) -> dict:
-        """:meth:`law_blocks` by the law's bytes (at most :data:`_LAW_CACHE` laws)."""
-        return {}
+def _stack(values, shape: tuple) -> np.ndarray:
+    """``values`` (a sequence of arrays of ``shape``) as one (m, *shape) float array."""
+    return np.array(values, dtype=float).reshape((len(values), *shape))
 
-    def blocks(self) -> tuple[np.ndarray, np.ndarray]:
-        """The tangent blocks at a zero step (the law's branch at an infinitesimal loading
-        step along the current force, or along the slip of a sliding contact)."""
-        base_a, base_b = self.base_blocks()
-        if self.sliding:
-            probe = self.slip_direction
-        else:
-            size = float(np.linalg.norm(self.tangential_force))
-            probe = self.tangential_force / size if size > 0 else np.zeros(3)
-        law = self.tangential_law(1e-300 * probe, 0.0)
-        la, lb, _, _ = self.law_blocks(law)
-        return base_a + la, base_b + lb
+
+def _dots(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise u_i · v_i (m,) of (m, k) arrays (as ``u[i] @ v[i]``, bit for bit)."""
+    return np.matmul(u[:, None, :], v[:, :, None])[:, 0, 0]
+
+
+def _apply(A: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise A_i v_i (m, r) of (m, r, k) and (m, k) arrays (as ``A[i] @ v[i]``)."""
+    return np.matmul(A, v[:, :, None])[:, :, 0]
+
+
+def _outer(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise u_i v_iᵀ (m, k, l)."""
+    return u[:, :, None] * v[:, None, :]
+
+
+def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Row-wise u_i × v_i (m, 3) (:func:`cross`'s arithmetic)."""
+    a, b, c = u[:, 0], u[:, 1], u[:, 2]
+    d, e, f = v[:, 0], v[:, 1], v[:, 2]
+    return np.stack([b * f - c * e, c * d - a * f, a * e - b * d], axis=1)
+
+
+def _skews(v: np.ndarray) -> np.ndarray:
+    """Row-wise [v_i]× (m, 3, 3)."""
+    out = np.zeros((len(v), 3, 3))
+    out[:, 0, 1], out[:, 0, 2] = -v[:, 2], v[:, 1]
+    out[:, 1, 0], out[:, 1, 2] = v[:, 2], -v[:, 0]
+    out[:, 2, 0], out[:, 2, 1] = -v[:, 1], v[:, 0]
+    return out
+
+
+def _vecmat(v: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """Row-wise v_iᵀ A_i (m, k) of (m, r) and (m, r, k) arrays (as ``v[i] @ A[i]``)."""
+    return np.matmul(v[:, None, :], A)[:, 0, :]
+
+
+_PA = np.hstack([_O, _I, _O, _O])       # dφ_a of (du_a, dφ_a, du_b, dφ_b)
+_UA = np.hstack([_I, _O, _O, _O])
+_UB = np.hstack([_O, _O, _I, _O])
+_DPSI = np.hstack([_O, -_I, _O, _I])    # the relative rotation dψ = dφ_b − dφ_a
+
+
+def _relative_rows(ra: np.ndarray, rb: np.ndarray) -> np.ndarray:
+    """dt (m, 3, 12): b's material point at levers ``ra``, ``rb`` (m, 3) from the centroids
+    relative to a's, for (du_a, dφ_a, du_b, dφ_b)."""
+    count = len(ra)
+    return np.concatenate([np.broadcast_to(-_I, (count, 3, 3)), _skews(ra),
+                           np.broadcast_to(_I, (count, 3, 3)), -_skews(rb)], axis=2)
+
+
+class ModelStack:
+    """The models of m contacts stacked (arrays whose first axis runs over the contacts), all
+    computed at once (module docstring): the rows of the approach ``approach_rows`` (m, 12) and
+    of the shift increment ``tangential_rows`` (m, 3, 12), the blocks of everything but the
+    tangential law ``base_a``, ``base_b`` (m, 6, 12), the wrenches of the current forces
+    ``wrench_a``, ``wrench_b`` (m, 6), and at any predicted motion the tangential laws
+    (:meth:`laws`) and their blocks (:meth:`law_blocks`). The Newton step
+    (:mod:`~thirdbody.network.cluster`) stacks its contacts once and evaluates their laws at
+    every pass of its active set, where one call per contact and pass cost more than the rest
+    of the model (a 100-sphere lattice: 305,000 calls of the per-contact law in two load
+    steps)."""
+
+    def __init__(self, models: Sequence[ContactModel]) -> None:
+        models = tuple(models)
+        count = len(models)
+        zero = np.zeros(3)
+
+        def field(name: str, shape: tuple = (3,), default=None) -> np.ndarray:
+            values = [getattr(c, name) for c in models]
+            return _stack([default if v is None else v for v in values], shape)
+
+        self.sliding = np.array([c.sliding for c in models], dtype=bool)
+        self.normal_force = field("normal_force", ())
+        self.mu = field("mu", ())
+        self.k_stick = field("k_stick", ())
+        self.k_loading = field("k_loading", ())
+        self.k_across = field("k_across", ())
+        self.k_normal = field("k_normal", ())
+        self.tangential_force = field("tangential_force")
+        #: the slip direction of a sliding contact (zero for one with stick cells)
+        self.direction = field("slip_direction", default=zero)
+        #: a sliding contact's slip in the step (zero for one with stick cells)
+        self.back = _stack([c.slipped if c.sliding and c.slipped is not None else zero
+                            for c in models], (3,))
+        #: dT/dN at a fixed shift of a contact with stick cells (zero for a sliding one)
+        self.stick_g = _stack([zero if c.sliding else c._stick_normal() for c in models], (3,))
+        n = field("normal")
+        point = field("point")
+        centre_a, centre_b = field("centre_a"), field("centre_b")
+        touch = _stack([c.point if c.touch is None else c.touch for c in models], (3,))
+        curvature_a, curvature_b = field("curvature_a", (3, 3)), field("curvature_b", (3, 3))
+        self.normal = n
+        self.projector = P = _I - _outer(n, n)
+        self.arm_a, self.arm_b = ra, rb = point - centre_a, point - centre_b
+        self._skew_a, self._skew_b = _skews(ra), _skews(rb)
+        # dδ (m, 12): the relative normal motion at the point of first touch (the closest
+        # points of the undeformed surfaces; the pressure centroid if not known): by the
+        # envelope theorem the closest points' own migration does not change the separation to
+        # first order (the pressure centroid lies a fraction of a cell away, which matters
+        # where the motions of a step nearly cancel in the approach: a rotation of the particle
+        # against the plates' motion)
+        self.approach_rows = -_vecmat(n, _relative_rows(touch - centre_a, touch - centre_b))
+        # the contact point's migration over a ξ, the normal's turn dn and the levers' changes
+        # (m, 3, 12) (module docstring)
+        dt = _relative_rows(ra, rb)
+        H = np.matmul(np.matmul(P, curvature_a + curvature_b), P)
+        H_plus = np.linalg.pinv(H, rcond=1e-9, hermitian=True)
+        skew_n = _skews(n)
+        xi = np.matmul(H_plus, np.matmul(np.matmul(curvature_b, P), dt) -
+                       np.matmul(skew_n, _DPSI))
+        dn = np.matmul(P, np.matmul(-skew_n, _PA) + np.matmul(curvature_a, xi))
+        d_ra = np.matmul(-self._skew_a, _PA) + xi
+        d_rb = _UA - np.matmul(self._skew_a, _PA) + xi - _UB
+        # the shift increment's change (m, 3, 12). Without the step's kinematics ds = P dt.
+        # With them (:meth:`ContactModel.stepping`): the evaluated increment is
+        # Δs = f P [Δc_b + Δφ_b × r̄_b − Δc_a − Δφ_a × r̄_a] with r̄ = ½(r₀ + r) the levers at
+        # the middle of the step, so ds = f P [dt(r̄) + ½ Δφ_b × dr_b − ½ Δφ_a × dr_a], dr the
+        # levers' change (the contact point migrates)
+        stepping = np.array([c.mid_a is not None for c in models], dtype=bool)
+        middle = _relative_rows(field("mid_a", default=zero), field("mid_b", default=zero)) + \
+            0.5 * (np.matmul(_skews(field("turn_b", default=zero)), d_rb) -
+                   np.matmul(_skews(field("turn_a", default=zero)), d_ra))
+        self.tangential_rows = np.where(stepping[:, None, None],
+                                        field("fraction", ())[:, None, None] *
+                                        np.matmul(P, middle), np.matmul(P, dt))
+        self._dN_rows = self.k_normal[:, None] * self.approach_rows
+        # the blocks of everything but the tangential law (m, 6, 12): the normal force's
+        # change, the rigid geometry (the normal turns, the point migrates, T stays in the
+        # tangent plane) and the twist
+        N, T = self.normal_force, self.tangential_force
+        twist = field("twist_moment", ())
+        f = (-N)[:, None] * n + T
+        df = -_outer(n, self._dN_rows) - N[:, None, None] * dn - _outer(n, _vecmat(T, dn))
+        dm = field("k_twist", ())[:, None] * _vecmat(n, np.broadcast_to(_DPSI, (count, 3, 12)))
+        skew_f = _skews(f)
+        dMa = np.matmul(-skew_f, d_ra) + np.matmul(self._skew_a, df) + _outer(n, dm) + \
+            twist[:, None, None] * dn
+        dMb = np.matmul(skew_f, d_rb) - np.matmul(self._skew_b, df) - _outer(n, dm) - \
+            twist[:, None, None] * dn
+        self.base_a = np.concatenate([df, dMa], axis=1)
+        self.base_b = np.concatenate([-df, dMb], axis=1)
+        # the wrenches (m, 6) of the current force and twist on a and b
+        moment = twist[:, None] * n
+        self.wrench_a = np.concatenate([f, _cross(ra, f) + moment], axis=1)
+        self.wrench_b = np.concatenate([-f, -_cross(rb, f) - moment], axis=1)
+
+    def laws(self, ds: np.ndarray, dN: np.ndarray) -> TangentialLaws:
+        """Each contact's branch of the tangential law at its predicted tangential displacement
+        ``ds`` (m, 3) and normal force change ``dN`` (m,), linearised there (module docstring;
+        ``tests/test_network_stiffness.py`` holds the same law written per contact):
+
+        * no friction (μ = 0 or k₀ = 0): no tangential force, the slide branch;
+        * a sliding contact whose slip goes on: μ(N + dN) along its slip, stiffness μN/|slip|
+          across it (``k_across``);
+        * otherwise the return to the cone of the elastic predictor
+          T + k (ds + s_slip) + g dN (k the partial-slip tangent of a contact with stick cells,
+          k₀ after a sliding contact's reversal; s_slip a sliding contact's slip in the step,
+          g its dT/dN in partial slip): stick inside μ(N + dN), else the slide branch along the
+          predictor, turning with stiffness μN k/|predictor| across it."""
+        P, T, N, mu = self.projector, self.tangential_force, self.normal_force, self.mu
+        frictionless = (mu <= 0) | (self.k_stick <= 0)
+        limit = mu * np.maximum(N + dN, 0.0)
+        d = self.direction
+        along = self.sliding & (_dots(ds, d) >= 0)
+        # a contact with stick cells: the tangent of its partial slip, whichever way the step
+        # goes (the BEM solves the step as one increment from its start, so a motion back
+        # from the current iterate is less loading in the step, not an unloading; measured
+        # on a tilted potato at |T|/muN = 0.9: dR/dx the same for +-1 nm, +-1e-6 rad)
+        loading = ~self.sliding & (_TANGENT_BOTH_WAYS | (_dots(ds, T) > 0))
+        k = np.where(loading, self.k_loading, self.k_stick)
+        g = self.stick_g
+        # a sliding contact's force is the return to the cone of the elastic predictor from
+        # the start of the step, T₀ + k₀ Δs = T + k₀ s_slip: the BEM solves one increment
+        # from there, so a reversal first takes back the step's slip at μN before it unloads
+        back = self.back
+        trial = T + k[:, None] * (ds + back) + g * dN[:, None]
+        size = np.sqrt(_dots(trial, trial))
+        stick = (size <= limit) | (size == 0)
+        safe = np.where(stick, 1.0, size)
+        u = trial / safe[:, None]
+        muN = mu * N
+        across = (muN / safe * k)[:, None, None] * (P - _outer(u, u))
+        stiffness = np.where(stick[:, None, None], k[:, None, None] * P, across)
+        gain = np.where(stick[:, None], g, mu[:, None] * u)
+        offset = np.where(stick[:, None], k[:, None] * back,
+                          muN[:, None] * u - _apply(across, ds) - T)
+        stiffness = np.where(along[:, None, None],
+                             self.k_across[:, None, None] * (P - _outer(d, d)), stiffness)
+        gain = np.where(along[:, None], mu[:, None] * d, gain)
+        offset = np.where(along[:, None], muN[:, None] * d - T, offset)
+        off = frictionless[:, None]
+        return TangentialLaws(np.where(off[:, :, None], 0.0, stiffness),
+                              np.where(off, 0.0, gain), np.where(off, 0.0, offset),
+                              frictionless | along | ~stick)
+
+    def elastic(self) -> TangentialLaws:
+        """The stick branch of each sliding contact's law (where a Newton step starts it): the
+        elastic predictor from the start of the step, T + k₀ (ds + s_slip) (module docstring);
+        for a contact with stick cells, from its current force, T + k₀ ds."""
+        k = self.k_stick
+        return TangentialLaws(k[:, None, None] * self.projector, np.zeros((len(k), 3)),
+                              k[:, None] * self.back, np.zeros(len(k), dtype=bool))
+
+    def law_blocks(self, laws: TangentialLaws):
+        """The (m, 6, 12) blocks of the laws' dT and the (m, 6) wrenches of their offsets, on a
+        and on b: (on_a, on_b, offset_a, offset_b)."""
+        dT = np.matmul(laws.stiffness, self.tangential_rows) + _outer(laws.g, self._dN_rows)
+        on_a = np.concatenate([dT, np.matmul(self._skew_a, dT)], axis=1)
+        on_b = -np.concatenate([dT, np.matmul(self._skew_b, dT)], axis=1)
+        c = laws.offset
+        return (on_a, on_b, np.concatenate([c, _cross(self.arm_a, c)], axis=1),
+                -np.concatenate([c, _cross(self.arm_b, c)], axis=1))
