@@ -43,7 +43,7 @@ import numpy as np
 from scipy import ndimage
 
 from .body import Body
-from .frame import contact_frame, gap_in_frame, heights_in_frame
+from .frame import Seen, contact_frame, gap_in_frame, seen_gap
 
 __all__ = ["Approach", "closest_approach"]
 
@@ -162,8 +162,9 @@ def _stencil(a: Body, b: Body, frame, origin, h: float):
     frame origin: slopes, Hessians and values at the centre, or None if a ray misses."""
     offsets = np.array([-h, 0.0, h])
     X, Y = np.meshgrid(offsets, offsets)        # [j, i]: y index j, x index i
-    _, za = heights_in_frame(a, frame, origin, X, Y)
-    zb, _ = heights_in_frame(b, frame, origin, X, Y)
+    F = frame.as_matrix()
+    _, za = Seen(a, frame, origin, F).heights(X, Y)
+    zb, _ = Seen(b, frame, origin, F).heights(X, Y)
     if not (np.isfinite(za).all() and np.isfinite(zb).all()):
         return None
     out = []
@@ -253,13 +254,15 @@ def _local_gap_minimum(a: Body, b: Body, frame, origin, x0: float, y0: float, h:
     soon as the gap falls below ``target`` (m): returns the point (m) and the gap there (m)
     (used to test a scan sample for a deeper minimum)."""
     x, y = x0, y0
-    best = (x, y, float(gap_in_frame(a, b, frame, origin, np.array(x), np.array(y))))
+    F = frame.as_matrix()
+    seen = (Seen(a, frame, origin, F), Seen(b, frame, origin, F))
+    best = (x, y, float(seen_gap(*seen, np.array(x), np.array(y))))
     for _ in range(max_iter):
         if best[2] < target:
             break
         offsets = np.array([-h, 0.0, h])
         X, Y = np.meshgrid(x + offsets, y + offsets)
-        g = gap_in_frame(a, b, frame, origin, X, Y)
+        g = seen_gap(*seen, X, Y)
         if not np.isfinite(g).all():
             break
         k = np.unravel_index(np.argmin(g), g.shape)
@@ -287,7 +290,7 @@ def _local_gap_minimum(a: Body, b: Body, frame, origin, x0: float, y0: float, h:
             if h <= floor:
                 break
             h = max(0.25 * h, floor)
-    g_end = float(gap_in_frame(a, b, frame, origin, np.array(x), np.array(y)))
+    g_end = float(seen_gap(*seen, np.array(x), np.array(y)))
     if g_end < best[2]:
         best = (x, y, g_end)
     return best
@@ -362,8 +365,9 @@ def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int) -> Appro
         n_k, origin_k, its, slope, converged = found
         iterations += its
         frame_k = contact_frame(n_k)
-        _, z_up = heights_in_frame(a, frame_k, origin_k, 0.0, 0.0)
-        z_low, _ = heights_in_frame(b, frame_k, origin_k, 0.0, 0.0)
+        F_k = frame_k.as_matrix()
+        _, z_up = Seen(a, frame_k, origin_k, F_k).heights(0.0, 0.0)
+        z_low, _ = Seen(b, frame_k, origin_k, F_k).heights(0.0, 0.0)
         z_up, z_low = float(z_up), float(z_low)
         candidate = Approach(
             normal=n_k, point_a=origin_k + frame_k.inv().apply([0.0, 0.0, z_up]),
