@@ -79,6 +79,9 @@ class Shape(abc.ABC):
     All lengths are in metres, angles in radians.
     """
 
+    #: convex: the vertical gap between two convex bodies has a single minimum
+    _convex = False
+
     def __init__(self) -> None:
         self._extreme_cache: dict[tuple, FloatArray] = {}
 

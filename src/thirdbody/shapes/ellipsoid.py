@@ -33,6 +33,8 @@ class Ellipsoid(Shape):
     machine precision *relative to the gap itself*, not only relative to the particle size.
     """
 
+    _convex = True
+
     def __init__(self, semi_axes: tuple[float, float, float] | ArrayLike) -> None:
         super().__init__()
         ax = np.asarray(semi_axes, dtype=float)
