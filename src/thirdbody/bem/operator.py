@@ -78,10 +78,13 @@ def _tabulate(kernel, ny: int, nx: int, dy: float, dx: float,
 
 
 def _zero_padded(field: np.ndarray, shape: tuple[int, ...], dtype) -> np.ndarray:
-    """``field`` (..., n₁, n₂) in the corner of zeros of the trailing ``shape`` (what
+    """``field`` (..., n₁, n₂) in the corner of zeros of the trailing ``shape`` (1 or 2 axes; what
     ``scipy.fft`` does with ``n``/``s`` larger than the input)."""
-    out = np.zeros((*field.shape[:-len(shape)], *shape), dtype=dtype)
-    out[(..., *(slice(0, n) for n in field.shape[-len(shape):]))] = field
+    out = np.zeros(field.shape[:-len(shape)] + shape, dtype=dtype)
+    if len(shape) == 1:
+        out[..., :field.shape[-1]] = field
+    else:
+        out[..., :field.shape[-2], :field.shape[-1]] = field
     return out
 
 

@@ -41,7 +41,9 @@ def unit(vector, name: str = "normal") -> np.ndarray:
 def smallest_rotation(u, v) -> Rotation:
     """The rotation about u × v taking the unit vector u to the unit vector v (a half turn about
     an axis ⟂ u, x if it can, when v = −u)."""
-    axis = np.cross(u, v)
+    # np.cross(u, v), spelt out (the same operations, without its overhead on 3-vectors)
+    axis = np.array([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                     u[0] * v[1] - u[1] * v[0]], dtype=float)
     s = float(np.linalg.norm(axis))
     c = float(np.dot(u, v))
     if s < 1e-300:
