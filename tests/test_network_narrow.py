@@ -195,6 +195,45 @@ def test_the_deeper_of_two_minima_is_found_from_a_misleading_start():
     assert R.inv().apply(plain.point_a - shift)[0] > 0     # the bump on the sphere's side
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_a_start_near_the_contact_finds_the_same_closest_points(seed):
+    """Started at a point 1 % of the size off the reference midpoint, with a normal 0.01 rad off
+    (the cluster solver's warm start from the last pass), the search skips the scan and ends on
+    the least-squares common normal within the tolerances of the scan's start, in at most 4
+    iterations (measured 3 to 4; 6 to 7 from the scan)."""
+    rng = np.random.default_rng(100 + seed)
+    (axa, Ra, ca), (axb, Rb, cb) = random_pair(rng)
+    a = Body(Ellipsoid(axa), MAT, Ra, ca)
+    b = Body(Ellipsoid(axb), MAT, Rb, cb)
+    n, sep, pa, pb = common_normal(axa, Ra.as_matrix(), ca, axb, Rb.as_matrix(), cb)
+    guess = n + 0.01 * np.cross(n, rng.normal(size=3) / np.sqrt(3))
+    near = 0.5 * (pa + pb) + 0.01 * min(axa.max(), axb.max()) * rng.normal(size=3) / np.sqrt(3)
+    found = closest_approach(a, b, normal=guess, near=near)
+    assert found.converged
+    assert found.iterations <= 4
+    np.testing.assert_allclose(found.normal, n, atol=1e-9)
+    assert found.separation == pytest.approx(sep, abs=1e-12)
+    np.testing.assert_allclose(found.point_a, pa, atol=1e-9)
+    np.testing.assert_allclose(found.point_b, pb, atol=1e-9)
+
+
+def test_a_start_near_the_shallower_of_two_minima_still_finds_the_deeper():
+    """The two bumps of test_the_deeper_of_two_minima_is_found_from_a_misleading_start, started
+    at the closest points on the shallower bump: a non-convex body is rescanned after the local
+    search, which finds the deeper one."""
+    R = Rotation.random(random_state=11)
+    shift = np.array([1e-3, -2e-3, 0.5e-3])
+    a = Body(two_bumps(), MAT, R, shift)
+    b = Body(Sphere(4e-3), MAT, R, R.apply([2e-5, 0, 4.67055e-3]) + shift)
+    plain = closest_approach(a, b)
+    # the shallower minimum: the misleading start's local search alone (no rescan)
+    shallow = closest_approach(a, b, normal=R.apply([0.6, 0.0, 1.0]),
+                               near=R.apply([-3e-4, 0.0, 0.64e-3]) + shift)
+    assert plain.separation == pytest.approx(4.100e-5, rel=1e-3)
+    assert shallow.separation == pytest.approx(plain.separation, abs=1e-15)
+    np.testing.assert_allclose(shallow.point_a, plain.point_a, atol=1e-12)
+
+
 def test_mesh_against_the_ellipsoid_it_tessellates():
     """Facets of ~4e-5 m on semi-axes of 1e-3 m: the normal within 1e-2 rad of the analytic
     one (measured 5e-3), the separation within 1e-6 m (measured 5e-7)."""

@@ -17,6 +17,11 @@ from functools import cached_property, lru_cache
 import numpy as np
 import scipy.fft as sfft
 
+try:        # scipy's own pocketfft binding: the transforms below without the dispatch layers
+    from scipy.fft._pocketfft import pypocketfft as _pocket
+except ImportError:         # pragma: no cover - another scipy layout: the public functions
+    _pocket = None
+
 from .._citations import cites
 from . import influence
 
@@ -29,6 +34,11 @@ _DCFFT = ("Liu, S., Wang, Q., Liu, G. (2000). A versatile method of discrete con
 #: cells added to a window for its periodic preconditioner (a margin against wrap-around)
 _PRECONDITION_PAD = 8
 _workers: int = int(os.environ.get("THIRDBODY_WORKERS", "0")) or 1
+#: operators kept per kind. A dense network has a window shape and a spacing per contact (each
+#: particle's own cell size): a few hundred contacts cycling through 32 slots missed every time
+#: (55 % of the tangential operators were rebuilt in a 36-sphere lattice). An operator of a
+#: 32 x 32 window holds about 0.1 MB.
+_OPERATORS = 1024
 
 
 def set_workers(n: int) -> None:
@@ -67,8 +77,24 @@ def _tabulate(kernel, ny: int, nx: int, dy: float, dx: float,
     return tuple(blocks)
 
 
+def _zero_padded(field: np.ndarray, shape: tuple[int, ...], dtype) -> np.ndarray:
+    """``field`` (..., n₁, n₂) in the corner of zeros of the trailing ``shape`` (1 or 2 axes; what
+    ``scipy.fft`` does with ``n``/``s`` larger than the input)."""
+    out = np.zeros(field.shape[:-len(shape)] + shape, dtype=dtype)
+    if len(shape) == 1:
+        out[..., :field.shape[-1]] = field
+    else:
+        out[..., :field.shape[-2], :field.shape[-1]] = field
+    return out
+
+
 class _Transform:
-    """Zero-padded real 2-D FFT pair that skips the transforms of all-zero padding rows."""
+    """Zero-padded real 2-D FFT pair that skips the transforms of all-zero padding rows.
+
+    The windows of a contact are small (tens of cells), so a transform costs less than
+    ``scipy.fft``'s dispatch (backend lookup, argument checks, padding): the pocketfft binding
+    behind it is called directly, with the arguments ``scipy.fft`` would pass (bit for bit
+    the same result; 2 to 3 times faster on 8 to 24 cell windows)."""
 
     def __init__(self, ny: int, nx: int) -> None:
         self.ny, self.nx = ny, nx
@@ -76,13 +102,26 @@ class _Transform:
 
     def forward(self, field: np.ndarray) -> np.ndarray:
         # rows first (only the ny data rows are non-zero), then columns over the padded length
-        rows = sfft.rfft(field, n=self.px, axis=-1, workers=_workers)
-        return sfft.fft(rows, n=self.py, axis=-2, workers=_workers, overwrite_x=True)
+        if _pocket is None:     # pragma: no cover
+            rows = sfft.rfft(field, n=self.px, axis=-1, workers=_workers)
+            return sfft.fft(rows, n=self.py, axis=-2, workers=_workers, overwrite_x=True)
+        field = np.asarray(field, dtype=float)
+        if field.shape[-1] < self.px:
+            field = _zero_padded(field, (self.px,), float)
+        rows = _pocket.r2c(field, (-1,), True, 0, None, _workers)
+        if rows.shape[-2] < self.py:
+            rows = _zero_padded(rows, (self.py, rows.shape[-1]), complex)
+        return _pocket.c2c(rows, (-2,), True, 0, rows, _workers)
 
     def inverse(self, spectrum: np.ndarray) -> np.ndarray:
-        cols = sfft.ifft(spectrum, axis=-2, workers=_workers, overwrite_x=True)
-        cols = cols[..., : self.ny, :]
-        out = sfft.irfft(cols, n=self.px, axis=-1, workers=_workers)
+        if _pocket is None:     # pragma: no cover
+            cols = sfft.ifft(spectrum, axis=-2, workers=_workers, overwrite_x=True)
+            cols = cols[..., : self.ny, :]
+            out = sfft.irfft(cols, n=self.px, axis=-1, workers=_workers)
+            return out[..., : self.nx]
+        spectrum = np.asarray(spectrum, dtype=complex)
+        cols = _pocket.c2c(spectrum, (-2,), False, 2, spectrum, _workers)
+        out = _pocket.c2r(cols[..., : self.ny, :], (-1,), self.px, False, 2, None, _workers)
         return out[..., : self.nx]
 
     def kernel_spectrum(self, kernel: np.ndarray) -> np.ndarray:
@@ -170,9 +209,18 @@ def _periodic_apply(field: np.ndarray, size: tuple[int, int], combine) -> np.nda
     """Transform ``field`` (..., ny, nx) on the periodic grid ``size``, let ``combine`` act on
     its spectrum in place, and return the window's part of the inverse transform."""
     ny, nx = field.shape[-2:]
-    spec = sfft.rfft2(field, s=size, workers=_workers)
+    if _pocket is None:     # pragma: no cover
+        spec = sfft.rfft2(field, s=size, workers=_workers)
+        combine(spec)
+        return sfft.irfft2(spec, s=size, workers=_workers)[..., :ny, :nx]
+    # as scipy.fft's rfft2 / irfft2 with s=size (_Transform's docstring)
+    field = np.asarray(field, dtype=float)
+    if (ny, nx) != tuple(size):
+        field = _zero_padded(field[..., :size[0], :size[1]], tuple(size), float)
+    axes = (field.ndim - 2, field.ndim - 1)
+    spec = _pocket.r2c(field, axes, True, 0, None, _workers)
     combine(spec)
-    return sfft.irfft2(spec, s=size, workers=_workers)[..., :ny, :nx]
+    return _pocket.c2r(spec, axes, size[1], False, 2, None, _workers)[..., :ny, :nx]
 
 
 @cites("dcfft", _DCFFT)
@@ -313,7 +361,7 @@ class CouplingOperator:
         return self._t.inverse(out)
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=_OPERATORS)
 def _coupling_cached(shape, spacing, factor) -> CouplingOperator:
     return CouplingOperator(shape, spacing, factor)
 
@@ -326,12 +374,12 @@ def coupling_operator(shape: tuple[int, int], spacing: tuple[float, float],
                             float(factor))
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=_OPERATORS)
 def _normal_cached(shape, spacing, E_star) -> NormalOperator:
     return NormalOperator(shape, spacing, E_star)
 
 
-@lru_cache(maxsize=32)
+@lru_cache(maxsize=_OPERATORS)
 def _tangential_cached(shape, spacing, G, nu) -> TangentialOperator:
     return TangentialOperator(shape, spacing, G, nu)
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -61,6 +62,13 @@ class Body:
         centre.setflags(write=False)
         object.__setattr__(self, "rotation", rotation)
         object.__setattr__(self, "centre", centre)
+
+    @cached_property
+    def matrix(self) -> np.ndarray:
+        """The rotation's 3 x 3 matrix (body -> world), computed once (read-only)."""
+        m = self.rotation.as_matrix()
+        m.setflags(write=False)
+        return m
 
     @property
     def size(self) -> float:

@@ -616,15 +616,19 @@ class _Problem:
                 hist = self.histories.get(key)
                 roles = (k, m) if hist is None else hist[0]
                 A, B = self.pair_bodies(key, roles, centres, rotations)
-                guess = None
+                guess = near = None
                 warm = last.get(key)
                 if warm is not None:
-                    guess = warm.contact.normal
+                    # the last pass's closest points, moved with the bodies, start the search
+                    solved = warm.contact
+                    guess = solved.normal
+                    near = solved.origin + 0.5 * ((A.centre - solved.a.centre)
+                                                  + (B.centre - solved.b.centre))
                 elif hist is not None:
                     old = hist[1]
                     guess = sum((new.rotation * prev.rotation.inv()).apply(old.normal)
                                 for new, prev in ((A, old.a), (B, old.b)))
-                closest = closest_approach(A, B, normal=guess)
+                closest = closest_approach(A, B, normal=guess, near=near)
                 if closest is None:
                     d = B.centre - A.centre
                     distance = float(np.linalg.norm(d))

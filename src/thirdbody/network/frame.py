@@ -41,7 +41,9 @@ def unit(vector, name: str = "normal") -> np.ndarray:
 def smallest_rotation(u, v) -> Rotation:
     """The rotation about u × v taking the unit vector u to the unit vector v (a half turn about
     an axis ⟂ u, x if it can, when v = −u)."""
-    axis = np.cross(u, v)
+    # np.cross(u, v), spelt out (the same operations, without its overhead on 3-vectors)
+    axis = np.array([u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2],
+                     u[0] * v[1] - u[1] * v[0]], dtype=float)
     s = float(np.linalg.norm(axis))
     c = float(np.dot(u, v))
     if s < 1e-300:
@@ -77,23 +79,53 @@ def pair_frame(a, b, normal) -> Rotation:
     return contact_frame(n)
 
 
+class Seen:
+    """A body seen from a frame: its centroid in frame coordinates (m) and its body -> frame
+    rotation (a ``Rotation`` and its matrix), worked out once for many rays.
+
+    ``frame`` is the world -> frame rotation, ``origin`` (3,) the frame origin in the world, m;
+    ``matrix`` is ``frame``'s matrix if the caller has it.
+    """
+
+    __slots__ = ("centre", "matrix", "rotation", "shape")
+
+    def __init__(self, body, frame: Rotation, origin, matrix: np.ndarray | None = None) -> None:
+        F = frame.as_matrix() if matrix is None else matrix
+        # F @ v is bit for bit frame.apply(v)
+        self.centre = F @ (np.asarray(body.centre, dtype=float) - np.asarray(origin, dtype=float))
+        self.rotation = frame * body.rotation
+        self.matrix = self.rotation.as_matrix()
+        self.shape = body.shape
+
+    def heights(self, x, y) -> tuple[np.ndarray, np.ndarray]:
+        """Lowest and highest heights (m) along the vertical rays at frame coordinates x, y (m);
+        NaN where a ray misses."""
+        c = self.centre
+        z_low, z_up = self.shape._surfaces_rotated(self.rotation, self.matrix,
+                                                   np.asarray(x) - c[0], np.asarray(y) - c[1])
+        return z_low + c[2], z_up + c[2]
+
+
 def heights_in_frame(body, frame: Rotation, origin, x, y) -> tuple[np.ndarray, np.ndarray]:
     """Lowest and highest heights (m) of ``body`` along vertical rays of the frame.
 
     ``frame`` is the world -> frame rotation, ``origin`` (3,) the frame origin in the world;
     ``x``, ``y`` are frame coordinates (m). NaN where the ray misses the body.
     """
-    c = frame.apply(np.asarray(body.centre, dtype=float) - np.asarray(origin, dtype=float))
-    z_low, z_up = body.shape.surfaces(frame * body.rotation, np.asarray(x) - c[0],
-                                      np.asarray(y) - c[1])
-    return z_low + c[2], z_up + c[2]
+    return Seen(body, frame, origin).heights(x, y)
+
+
+def seen_gap(a: Seen, b: Seen, x, y) -> np.ndarray:
+    """:func:`gap_in_frame` of two bodies already seen from the frame."""
+    _, z_up = a.heights(x, y)
+    z_low, _ = b.heights(x, y)
+    gap = z_low - z_up
+    return np.where(np.isnan(gap), np.inf, gap)
 
 
 def gap_in_frame(a, b, frame: Rotation, origin, x, y) -> np.ndarray:
     """Vertical gap (m) from body a (below) to body b (above) at frame coordinates (x, y): the
     lowest height of b minus the highest height of a; +inf where a ray misses either body,
     negative where the undeformed bodies overlap."""
-    _, z_up = heights_in_frame(a, frame, origin, x, y)
-    z_low, _ = heights_in_frame(b, frame, origin, x, y)
-    gap = z_low - z_up
-    return np.where(np.isnan(gap), np.inf, gap)
+    F = frame.as_matrix()
+    return seen_gap(Seen(a, frame, origin, F), Seen(b, frame, origin, F), x, y)

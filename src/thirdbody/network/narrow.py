@@ -24,7 +24,11 @@ alike, in any orientation:
    second difference) is, is searched locally, and if it leads to a lower minimum of the gap
    the iteration restarts there. For non-convex bodies the result is the deepest of the local
    minima; the contact window (:mod:`~thirdbody.network.contact`) takes every cell below its
-   bound, so shallower spots are not lost.
+   bound, so shallower spots are not lost. Two convex bodies (ellipsoids) have a convex
+   vertical gap, whose one minimum is the one found: they are not rescanned.
+
+Started ``near`` a known contact point (the cluster solver's last pass), the local search
+begins there at its smallest stencil, without the first scan.
 
 For convex bodies that do not overlap this is the distance between them (every vertical segment
 from a to b is at least as long as the shortest one); for overlapping ones it is the common
@@ -43,7 +47,7 @@ import numpy as np
 from scipy import ndimage
 
 from .body import Body
-from .frame import contact_frame, gap_in_frame, heights_in_frame
+from .frame import Seen, contact_frame, seen_gap
 
 __all__ = ["Approach", "closest_approach"]
 
@@ -116,9 +120,11 @@ class _Scan:
 
 def footprint_box(a: Body, b: Body, frame, origin) -> tuple[float, float, float, float] | None:
     """The frame rectangle (x0, x1, y0, y1), m, holding every vertical ray that can meet both
-    bodies (the intersection of their bounding discs' boxes), or None if empty."""
-    ca = frame.apply(a.centre - origin)
-    cb = frame.apply(b.centre - origin)
+    bodies (the intersection of their bounding discs' boxes), or None if empty. ``frame``: the
+    world -> frame rotation, or its matrix."""
+    F = frame if isinstance(frame, np.ndarray) else frame.as_matrix()
+    ca = F @ (a.centre - origin)
+    cb = F @ (b.centre - origin)
     x0, x1 = max(ca[0] - a.size, cb[0] - b.size), min(ca[0] + a.size, cb[0] + b.size)
     y0, y1 = max(ca[1] - a.size, cb[1] - b.size), min(ca[1] + a.size, cb[1] + b.size)
     if x0 >= x1 or y0 >= y1:
@@ -142,8 +148,32 @@ def allowance(g: np.ndarray) -> np.ndarray:
     return np.where(np.isfinite(g), np.maximum(out, 0.0), 0.0)
 
 
-def _scan(a: Body, b: Body, frame, origin, spacing: float) -> _Scan | None:
-    box = footprint_box(a, b, frame, origin)
+class _Frame:
+    """The contact frame about a normal (:func:`contact_frame`) with its matrices: every product
+    has the bits of the ``Rotation`` method it replaces (``R.apply(v)`` is ``R.as_matrix() @ v``
+    bit for bit), without scipy's overhead per call."""
+
+    __slots__ = ("_back", "matrix", "rotation")
+
+    def __init__(self, normal) -> None:
+        self.rotation = contact_frame(normal)
+        self.matrix = self.rotation.as_matrix()
+        self._back = None
+
+    def back(self, v) -> np.ndarray:
+        """Frame -> world: ``rotation.inv().apply(v)`` for a 3-vector."""
+        if self._back is None:
+            self._back = self.rotation.inv().as_matrix()
+        return self._back @ np.asarray(v, dtype=float)
+
+
+def _seen(a: Body, b: Body, F: _Frame, origin) -> tuple[Seen, Seen]:
+    """Bodies a and b seen from the frame F at ``origin``."""
+    return Seen(a, F.rotation, origin, F.matrix), Seen(b, F.rotation, origin, F.matrix)
+
+
+def _scan(a: Body, b: Body, F: _Frame, origin, spacing: float) -> _Scan | None:
+    box = footprint_box(a, b, F.matrix, origin)
     if box is None:
         return None
     x0, x1, y0, y1 = box
@@ -151,7 +181,7 @@ def _scan(a: Body, b: Body, frame, origin, spacing: float) -> _Scan | None:
     x = spacing * np.arange(math.floor(x0 / spacing), math.ceil(x1 / spacing) + 1)
     y = spacing * np.arange(math.floor(y0 / spacing), math.ceil(y1 / spacing) + 1)
     X, Y = np.meshgrid(x, y)
-    gap = gap_in_frame(a, b, frame, origin, X, Y)
+    gap = seen_gap(*_seen(a, b, F, origin), X, Y)
     if not np.isfinite(gap).any():
         return None
     return _Scan(x, y, gap, allowance(gap))
@@ -160,10 +190,16 @@ def _scan(a: Body, b: Body, frame, origin, spacing: float) -> _Scan | None:
 def _stencil(a: Body, b: Body, frame, origin, h: float):
     """Heights of a's upper and b's lower surface on the 3 x 3 stencil of step h (m) about the
     frame origin: slopes, Hessians and values at the centre, or None if a ray misses."""
+    F = frame.as_matrix()
+    return _stencil_seen(Seen(a, frame, origin, F), Seen(b, frame, origin, F), h)
+
+
+def _stencil_seen(sa: Seen, sb: Seen, h: float):
+    """:func:`_stencil` of two bodies seen from the frame."""
     offsets = np.array([-h, 0.0, h])
     X, Y = np.meshgrid(offsets, offsets)        # [j, i]: y index j, x index i
-    _, za = heights_in_frame(a, frame, origin, X, Y)
-    zb, _ = heights_in_frame(b, frame, origin, X, Y)
+    _, za = sa.heights(X, Y)
+    zb, _ = sb.heights(X, Y)
     if not (np.isfinite(za).all() and np.isfinite(zb).all()):
         return None
     out = []
@@ -214,8 +250,8 @@ def _local(a: Body, b: Body, normal: np.ndarray, origin: np.ndarray, h: float, t
     trust = 0.25 * size
     best = None
     for it in range(1, max_iter + 1):
-        frame = contact_frame(normal)
-        st = _stencil(a, b, frame, origin, h)
+        F = _Frame(normal)
+        st = _stencil_seen(*_seen(a, b, F, origin), h)
         if st is None:
             if h <= h_final:
                 return best
@@ -226,15 +262,15 @@ def _local(a: Body, b: Body, normal: np.ndarray, origin: np.ndarray, h: float, t
             # not a minimum of the gap here (a saddle or worse): go downhill along the
             # direction of negative curvature, keeping the normal
             down = v[:, 0] if (st[1][1] - st[0][1]) @ v[:, 0] <= 0 else -v[:, 0]
-            origin = origin + frame.inv().apply([*(max(h, 0.05 * size) * down), 0.0])
+            origin = origin + F.back([*(max(h, 0.05 * size) * down), 0.0])
             h = max(h, min(0.05 * size, 4.0 * h))
             best = None
             continue
         xa, xb, s, za, zb = _model_step(*st, trust)
         slope = max(float(np.linalg.norm(st[0][1])), float(np.linalg.norm(st[1][1])))
-        new_normal = frame.inv().apply(np.array([-s[0], -s[1], 1.0]) / math.hypot(1.0, *s))
+        new_normal = F.back(np.array([-s[0], -s[1], 1.0]) / math.hypot(1.0, *s))
         mid = 0.5 * (np.array([*xa, za]) + np.array([*xb, zb]))
-        new_origin = origin + frame.inv().apply(mid)
+        new_origin = origin + F.back(mid)
         step = max(float(np.linalg.norm(xa)), float(np.linalg.norm(xb)))
         turn = float(np.linalg.norm(new_normal - normal))
         best = (normal, origin, it, slope, False)
@@ -246,20 +282,22 @@ def _local(a: Body, b: Body, normal: np.ndarray, origin: np.ndarray, h: float, t
     return best
 
 
-def _local_gap_minimum(a: Body, b: Body, frame, origin, x0: float, y0: float, h: float,
+def _local_gap_minimum(a: Body, b: Body, F: _Frame, origin, x0: float, y0: float,
+                       h: float,
                        floor: float, target: float,
                        max_iter: int = 30) -> tuple[float, float, float]:
     """Newton's method on the vertical gap alone, in a fixed frame, from (x0, y0), stopping as
     soon as the gap falls below ``target`` (m): returns the point (m) and the gap there (m)
     (used to test a scan sample for a deeper minimum)."""
     x, y = x0, y0
-    best = (x, y, float(gap_in_frame(a, b, frame, origin, np.array(x), np.array(y))))
+    seen = _seen(a, b, F, origin)
+    best = (x, y, float(seen_gap(*seen, np.array(x), np.array(y))))
     for _ in range(max_iter):
         if best[2] < target:
             break
         offsets = np.array([-h, 0.0, h])
         X, Y = np.meshgrid(x + offsets, y + offsets)
-        g = gap_in_frame(a, b, frame, origin, X, Y)
+        g = seen_gap(*seen, X, Y)
         if not np.isfinite(g).all():
             break
         k = np.unravel_index(np.argmin(g), g.shape)
@@ -287,14 +325,14 @@ def _local_gap_minimum(a: Body, b: Body, frame, origin, x0: float, y0: float, h:
             if h <= floor:
                 break
             h = max(0.25 * h, floor)
-    g_end = float(gap_in_frame(a, b, frame, origin, np.array(x), np.array(y)))
+    g_end = float(seen_gap(*seen, np.array(x), np.array(y)))
     if g_end < best[2]:
         best = (x, y, g_end)
     return best
 
 
 def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60,
-                     normal=None) -> Approach | None:
+                     normal=None, near=None) -> Approach | None:
     """The common normal and closest points of bodies a and b (module docstring).
 
     Parameters
@@ -308,6 +346,12 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
     normal : (3,) array, optional
         A first estimate of the normal from a to b (e.g. the previous step's); default: the
         direction from a's centroid to b's.
+    near : (3,) array, optional
+        A world point near the closest points (m; e.g. their midpoint at nearby poses) with
+        ``normal``: the local search starts there instead of at the lowest sample of a scan of
+        the footprint. Convex bodies (ellipsoids) have one minimum of the gap, so that is all;
+        other shapes are still scanned for a deeper one (step 3). If the search from there
+        fails, the scan is done as without ``near``.
 
     Returns
     -------
@@ -323,16 +367,20 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
     if distance > (a.size + b.size) * (1.0 + 1e-12):
         return None
     towards = d / distance if distance > 0 else np.array([0.0, 0.0, 1.0])
-    starts = [towards]
+    starts = [(towards, None)]
     if normal is not None:
         guess = np.asarray(normal, dtype=float).reshape(-1)
         length = float(np.linalg.norm(guess)) if guess.shape == (3,) else 0.0
         # a guess pointing away from b is no guess
         if math.isfinite(length) and length > 0 and guess @ towards > 0:
-            starts.insert(0, guess / length)
+            starts.insert(0, (guess / length, None))
+            if near is not None:
+                point = np.asarray(near, dtype=float).reshape(-1)
+                if point.shape == (3,) and np.isfinite(point).all():
+                    starts.insert(0, (guess / length, point))
     best = None
-    for n in starts:
-        found = _search(a, b, n, tol, max_iter)
+    for n, point in starts:
+        found = _search(a, b, n, tol, max_iter, point)
         if found is not None and (best is None or (found.converged and not best.converged)):
             best = found
         if best is not None and best.converged:
@@ -340,42 +388,55 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
     return best
 
 
-def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int) -> Approach | None:
-    """closest_approach from one first normal estimate ``n``."""
-    origin = 0.5 * (a.centre + b.centre)
+def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int,
+            near: np.ndarray | None = None) -> Approach | None:
+    """closest_approach from one first normal estimate ``n`` (and a world point ``near`` the
+    contact to start the local search at, instead of a scan's lowest sample)."""
     spacing = _scan_spacing(a, b)
-    frame = contact_frame(n)
-    scan = _scan(a, b, frame, origin, spacing)
-    if scan is None:
-        return None
+    F = _Frame(n)
+    if near is None:
+        origin = 0.5 * (a.centre + b.centre)
+        scan = _scan(a, b, F, origin, spacing)
+        if scan is None:
+            return None
+        j, i = np.unravel_index(np.argmin(scan.gap), scan.gap.shape)
+        start = (float(scan.x[i]), float(scan.y[j]))
+    else:
+        origin, start = near, (0.0, 0.0)
+    h_start = spacing if near is None else 0.0
     size = min(a.size, b.size)
     floor = max(1e-5 * size, _smoothing(a), _smoothing(b))
-    j, i = np.unravel_index(np.argmin(scan.gap), scan.gap.shape)
-    start = (float(scan.x[i]), float(scan.y[j]))
+    # the vertical gap of two convex bodies is convex: its one minimum is the one found
+    convex = a.shape._convex and b.shape._convex
     iterations = 0
     best: Approach | None = None
     for _ in range(_MAX_RESTARTS):
-        origin_k = origin + frame.inv().apply([start[0], start[1], 0.0])
-        found = _local(a, b, n, origin_k, spacing, tol, max_iter)
+        origin_k = origin + F.back([start[0], start[1], 0.0])
+        # from a point near the contact the stencil starts at its smallest step
+        found = _local(a, b, n, origin_k, h_start, tol, max_iter)
+        h_start = spacing
         if found is None:
             break
         n_k, origin_k, its, slope, converged = found
         iterations += its
-        frame_k = contact_frame(n_k)
-        _, z_up = heights_in_frame(a, frame_k, origin_k, 0.0, 0.0)
-        z_low, _ = heights_in_frame(b, frame_k, origin_k, 0.0, 0.0)
+        F_k = _Frame(n_k)
+        sa, sb = _seen(a, b, F_k, origin_k)
+        _, z_up = sa.heights(0.0, 0.0)
+        z_low, _ = sb.heights(0.0, 0.0)
         z_up, z_low = float(z_up), float(z_low)
         candidate = Approach(
-            normal=n_k, point_a=origin_k + frame_k.inv().apply([0.0, 0.0, z_up]),
-            point_b=origin_k + frame_k.inv().apply([0.0, 0.0, z_low]),
+            normal=n_k, point_a=origin_k + F_k.back([0.0, 0.0, z_up]),
+            point_b=origin_k + F_k.back([0.0, 0.0, z_low]),
             separation=z_low - z_up, iterations=iterations, slope=slope, converged=converged)
         if best is None or (candidate.converged, -candidate.separation) > \
                 (best.converged, -best.separation):
             best = candidate
+        if convex and converged:
+            break
         # a deeper minimum elsewhere in this frame? (non-convex bodies)
-        frame, origin, n = frame_k, candidate.midpoint, n_k
-        scan = _scan(a, b, frame, origin, spacing)
-        deeper = _deeper_start(a, b, frame, origin, scan, best.separation, spacing, floor)
+        F, origin, n = F_k, candidate.midpoint, n_k
+        scan = _scan(a, b, F, origin, spacing)
+        deeper = _deeper_start(a, b, F, origin, scan, best.separation, spacing, floor)
         if deeper is None:
             break
         start = deeper
@@ -385,7 +446,7 @@ def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int) -> Appro
                     best.slope, best.converged)
 
 
-def _deeper_start(a, b, frame, origin, scan: _Scan | None, separation: float, spacing: float,
+def _deeper_start(a, b, F, origin, scan: _Scan | None, separation: float, spacing: float,
                   floor: float) -> tuple[float, float] | None:
     """A frame point from which the gap falls below ``separation`` (m), or None."""
     if scan is None:
@@ -408,7 +469,7 @@ def _deeper_start(a, b, frame, origin, scan: _Scan | None, separation: float, sp
         starts.append((float(scan.gap[j, i]), float(X[j, i]), float(Y[j, i])))
     target = separation - margin
     for _, x0, y0 in sorted(starts)[:8]:
-        x, y, g = _local_gap_minimum(a, b, frame, origin, x0, y0, spacing / 2,
+        x, y, g = _local_gap_minimum(a, b, F, origin, x0, y0, spacing / 2,
                                      max(floor, 1e-3 * spacing), target)
         if g < target and math.hypot(x, y) > spacing:
             return x, y

@@ -218,7 +218,8 @@ class PlateLattice(Lattice):
         self._setup(zero, spacing, r, body.shape.feature_length, (-r, r, -r, r))
 
     def _rays(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        z_low, z_up = self.body.shape.surfaces(self.body.rotation, x, y)
+        z_low, z_up = self.body.shape._surfaces_rotated(self.body.rotation, self.body.matrix,
+                                                        x, y)
         if self.side == "lower":
             raw = self.origin[2] + z_low - self.plate
         else:

@@ -34,7 +34,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..particle.interface import Window
-from .frame import gap_in_frame
+from .frame import Seen, seen_gap
 from .narrow import SCAN_SAMPLES, allowance, footprint_box
 
 __all__ = ["Lattice", "carry_field"]
@@ -63,6 +63,8 @@ class Lattice:
     def __init__(self, a, b, frame, origin, zero: float, spacing: float) -> None:
         self.a, self.b, self.frame = a, b, frame
         self.origin = np.asarray(origin, dtype=float)
+        F = frame.as_matrix()
+        self._seen = (Seen(a, frame, self.origin, F), Seen(b, frame, self.origin, F))
         box = footprint_box(a, b, frame, self.origin)
         if box is None:
             raise ValueError("the bodies' footprints do not overlap in the contact frame")
@@ -88,7 +90,7 @@ class Lattice:
     def _rays(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The raw gap (m, before the zero level is taken off) at lattice coordinates x, y (m);
         +inf where a ray misses."""
-        return gap_in_frame(self.a, self.b, self.frame, self.origin, x, y)
+        return seen_gap(*self._seen, x, y)
 
     def gap(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """g₀ (m) at cells (i, j) (integer arrays of one shape); +inf where a ray misses."""

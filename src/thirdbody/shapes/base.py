@@ -79,6 +79,9 @@ class Shape(abc.ABC):
     All lengths are in metres, angles in radians.
     """
 
+    #: convex: the vertical gap between two convex bodies has a single minimum
+    _convex = False
+
     def __init__(self) -> None:
         self._extreme_cache: dict[tuple, FloatArray] = {}
 
@@ -120,6 +123,12 @@ class Shape(abc.ABC):
         """A characteristic length (m): the largest distance from the centroid to the surface."""
 
     # --- provided ---------------------------------------------------------------------------
+    def _surfaces_rotated(self, rotation: Rotation, R: FloatArray, x: ArrayLike,
+                          y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """:meth:`surfaces` at ``rotation`` whose matrix ``R`` (3, 3) the caller already has (the
+        hot paths of the network solver keep both); the default ignores ``R``."""
+        return self.surfaces(rotation, x, y)
+
     @property
     def centroid(self) -> FloatArray:
         """Volume centroid (m) in the body frame: zero by construction."""

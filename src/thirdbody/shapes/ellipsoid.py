@@ -33,6 +33,8 @@ class Ellipsoid(Shape):
     machine precision *relative to the gap itself*, not only relative to the particle size.
     """
 
+    _convex = True
+
     def __init__(self, semi_axes: tuple[float, float, float] | ArrayLike) -> None:
         super().__init__()
         ax = np.asarray(semi_axes, dtype=float)
@@ -62,7 +64,10 @@ class Ellipsoid(Shape):
 
     def _quadric(self, orientation: OrientationLike) -> tuple[FloatArray, FloatArray]:
         """World-frame quadric ``M = R D Rᵀ`` (D = diag(1/A², 1/B², 1/C²)) and its inverse."""
-        R = matrix(orientation)
+        return self._quadric_of(matrix(orientation))
+
+    def _quadric_of(self, R: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """:meth:`_quadric` from the rotation matrix ``R`` (3, 3), body -> world."""
         M = (R / self._axes**2) @ R.T
         Minv = (R * self._axes**2) @ R.T
         return M, Minv
@@ -92,18 +97,7 @@ class Ellipsoid(Shape):
         the rest exactly).
         """
         M, Minv = self._quadric(orientation)
-        h = np.sqrt(Minv[2, 2])
-        dx = x + Minv[0, 2] / h
-        dy = y + Minv[1, 2] / h
-        qa = M[2, 2]
-        qc = M[0, 0] * dx * dx + 2.0 * M[0, 1] * dx * dy + M[1, 1] * dy * dy
-        qb = -1.0 / h + M[0, 2] * dx + M[1, 2] * dy
-        disc = qb * qb - qa * qc
-        root = np.sqrt(np.maximum(disc, 0.0))
-        # For a ray that hits, both roots are >= 0, hence qb < 0 and -qb + root > 0.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            gap = qc / (root - qb)
-        return gap, disc
+        return _gap_and_hit(M, Minv, np.sqrt(Minv[2, 2]), x, y)
 
     def surfaces(self, orientation: OrientationLike, x: ArrayLike,
                  y: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -111,11 +105,22 @@ class Ellipsoid(Shape):
 
         See :meth:`Shape.surfaces`. Closed form, accurate to machine precision.
         """
+        return self._surfaces_of(matrix(orientation), x, y)
+
+    def _surfaces_rotated(self, rotation: Rotation, R: FloatArray, x: ArrayLike,
+                          y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        return self._surfaces_of(R, x, y)
+
+    def _surfaces_of(self, R: FloatArray, x: ArrayLike,
+                     y: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """:meth:`surfaces` at the rotation matrix ``R`` (3, 3): one quadric for both
+        surfaces."""
         xa, ya = _broadcast_xy(x, y)
-        h = self.half_height(orientation)
-        g_low, disc = self._lower_gap_and_hit(orientation, xa, ya)
+        M, Minv = self._quadric_of(R)
+        h = np.sqrt(Minv[2, 2])
+        g_low, disc = _gap_and_hit(M, Minv, h, xa, ya)
         # Central symmetry: the upper surface at (x, y) is the lower one at (-x, -y), negated.
-        g_up, _ = self._lower_gap_and_hit(orientation, -xa, -ya)
+        g_up, _ = _gap_and_hit(M, Minv, h, -xa, -ya)
         hit = disc >= 0.0
         z_low = np.where(hit, -h + g_low, np.nan)
         z_up = np.where(hit, h - g_up, np.nan)
@@ -147,6 +152,23 @@ class Ellipsoid(Shape):
     def _radial_surface(self, directions: FloatArray) -> FloatArray:
         d = np.asarray(directions, dtype=float)
         return d / np.sqrt(np.sum((d / self._axes) ** 2, axis=-1, keepdims=True))
+
+
+def _gap_and_hit(M: FloatArray, Minv: FloatArray, h, x: FloatArray,
+                 y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """:meth:`Ellipsoid._lower_gap_and_hit` from the quadric M, its inverse and the
+    half-height h (m)."""
+    dx = x + Minv[0, 2] / h
+    dy = y + Minv[1, 2] / h
+    qa = M[2, 2]
+    qc = M[0, 0] * dx * dx + 2.0 * M[0, 1] * dx * dy + M[1, 1] * dy * dy
+    qb = -1.0 / h + M[0, 2] * dx + M[1, 2] * dy
+    disc = qb * qb - qa * qc
+    root = np.sqrt(np.maximum(disc, 0.0))
+    # For a ray that hits, both roots are >= 0, hence qb < 0 and -qb + root > 0.
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gap = qc / (root - qb)
+    return gap, disc
 
 
 class Sphere(Ellipsoid):
