@@ -101,3 +101,29 @@ def test_operator_is_the_exact_linear_convolution():
     np.testing.assert_allclose(normal_operator((ny, nx), (dx, dy), E_STAR)(p), u, rtol=1e-12)
     np.testing.assert_allclose(tangential_operator((ny, nx), (dx, dy), G, NU)(t), ut,
                                rtol=1e-12, atol=1e-14 * np.abs(ut).max())
+
+
+def test_the_operator_caches_are_bounded_by_count_and_bytes(monkeypatch):
+    """Operators are kept by their arguments, least recently used dropped first, within a count
+    and a byte budget (the arrays of a 40 x 40 normal operator: its padded spectrum, counted
+    here from the array sizes independently of the cache's own count)."""
+    from thirdbody.bem import operator as op
+
+    cache = op._Cache(op.NormalOperator)
+    one = cache((40, 40), (1e-6, 1e-6), 1e9)
+    size = sum(v.nbytes for v in vars(one).values() if isinstance(v, np.ndarray))
+    assert size > 0 and cache.nbytes >= size
+    assert cache((40, 40), (1e-6, 1e-6), 1e9) is one                     # a hit
+    monkeypatch.setattr(op, "_OPERATOR_BYTES", 2.5 * cache.nbytes)       # room for two
+    two = cache((40, 40), (2e-6, 2e-6), 1e9)
+    cache((40, 40), (1e-6, 1e-6), 1e9)                                   # one used last
+    cache((40, 40), (3e-6, 3e-6), 1e9)                                   # evicts two
+    assert len(cache.items) == 2 and cache.nbytes <= op._OPERATOR_BYTES
+    assert cache((40, 40), (1e-6, 1e-6), 1e9) is one
+    assert cache((40, 40), (2e-6, 2e-6), 1e9) is not two                 # rebuilt
+    monkeypatch.setattr(op, "_OPERATORS", 1)                             # count bound
+    cache((40, 40), (4e-6, 4e-6), 1e9)
+    assert len(cache.items) == 1
+    monkeypatch.setattr(op, "_OPERATOR_BYTES", 1)                        # too large to keep
+    big = cache((40, 40), (5e-6, 5e-6), 1e9)
+    assert big is not cache((40, 40), (5e-6, 5e-6), 1e9)

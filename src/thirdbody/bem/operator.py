@@ -12,7 +12,8 @@ Reference: Liu, S., Wang, Q., Liu, G. (2000). A versatile method of discrete con
 from __future__ import annotations
 
 import os
-from functools import cached_property, lru_cache
+from collections import OrderedDict
+from functools import cached_property
 
 import numpy as np
 import scipy.fft as sfft
@@ -39,6 +40,45 @@ _workers: int = int(os.environ.get("THIRDBODY_WORKERS", "0")) or 1
 #: (55 % of the tangential operators were rebuilt in a 36-sphere lattice). An operator of a
 #: 32 x 32 window holds about 0.1 MB.
 _OPERATORS = 1024
+#: and at most this many bytes of their arrays per kind: the tangential operator of a 512 x 512
+#: window holds 12 MB when built, so 1024 of them would not fit in memory
+_OPERATOR_BYTES = 256 * 2**20
+
+
+def _nbytes(obj, depth: int = 2) -> int:
+    """The bytes of the numpy arrays an operator holds (in its attributes, to ``depth``)."""
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if depth == 0:
+        return 0
+    if isinstance(obj, (tuple, list)):
+        return sum(_nbytes(v, depth - 1) for v in obj)
+    fields = getattr(obj, "__dict__", None)
+    return 0 if fields is None else sum(_nbytes(v, depth - 1) for v in fields.values())
+
+
+class _Cache:
+    """The operators built last, by their arguments: at most :data:`_OPERATORS` of them and
+    :data:`_OPERATOR_BYTES` of arrays (measured when built), the least recently used dropped
+    first (an operator larger than the whole budget is built, then dropped at once)."""
+
+    def __init__(self, build) -> None:
+        self.build = build
+        self.items: OrderedDict = OrderedDict()
+        self.nbytes = 0
+
+    def __call__(self, *key):
+        hit = self.items.get(key)
+        if hit is not None:
+            self.items.move_to_end(key)
+            return hit[0]
+        op = self.build(*key)
+        size = _nbytes(op)
+        self.items[key] = (op, size)
+        self.nbytes += size
+        while len(self.items) > _OPERATORS or self.nbytes > _OPERATOR_BYTES:
+            self.nbytes -= self.items.popitem(last=False)[1][1]
+        return op
 
 
 def set_workers(n: int) -> None:
@@ -361,9 +401,7 @@ class CouplingOperator:
         return self._t.inverse(out)
 
 
-@lru_cache(maxsize=_OPERATORS)
-def _coupling_cached(shape, spacing, factor) -> CouplingOperator:
-    return CouplingOperator(shape, spacing, factor)
+_coupling_cached = _Cache(CouplingOperator)
 
 
 def coupling_operator(shape: tuple[int, int], spacing: tuple[float, float],
@@ -374,14 +412,8 @@ def coupling_operator(shape: tuple[int, int], spacing: tuple[float, float],
                             float(factor))
 
 
-@lru_cache(maxsize=_OPERATORS)
-def _normal_cached(shape, spacing, E_star) -> NormalOperator:
-    return NormalOperator(shape, spacing, E_star)
-
-
-@lru_cache(maxsize=_OPERATORS)
-def _tangential_cached(shape, spacing, G, nu) -> TangentialOperator:
-    return TangentialOperator(shape, spacing, G, nu)
+_normal_cached = _Cache(NormalOperator)
+_tangential_cached = _Cache(TangentialOperator)
 
 
 def normal_operator(shape: tuple[int, int], spacing: tuple[float, float],
