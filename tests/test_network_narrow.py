@@ -84,6 +84,15 @@ def random_pair(rng, gap_range=(-0.05, 0.05)):
     return (axa, Ra, ca), (axb, Rb, cb)
 
 
+def assert_closest(found, n, sep, pa, pb):
+    """``found`` is the independent reference's common normal, separation and closest points
+    (normal and points to 1e-9, separation to 1e-12; sizes ~1)."""
+    np.testing.assert_allclose(found.normal, n, atol=1e-9)
+    assert found.separation == pytest.approx(sep, abs=1e-12)
+    np.testing.assert_allclose(found.point_a, pa, atol=1e-9)
+    np.testing.assert_allclose(found.point_b, pb, atol=1e-9)
+
+
 @pytest.mark.parametrize("seed", range(40))
 def test_ellipsoids_against_least_squares(seed):
     """Measured over 40 poses: normal within 6e-11, separation within 2e-15, points within
@@ -97,10 +106,7 @@ def test_ellipsoids_against_least_squares(seed):
     # Newton's method on the surfaces' quadratic models: 6 or 7 iterations on these poses (12
     # with the gap's terms dropped from the model)
     assert found.iterations <= 8
-    np.testing.assert_allclose(found.normal, n, atol=1e-9)
-    assert found.separation == pytest.approx(sep, abs=1e-12)
-    np.testing.assert_allclose(found.point_a, pa, atol=1e-9)
-    np.testing.assert_allclose(found.point_b, pb, atol=1e-9)
+    assert_closest(found, n, sep, pa, pb)
     np.testing.assert_allclose(found.point_b - found.point_a, found.separation * found.normal,
                                atol=1e-12)
     np.testing.assert_allclose(found.midpoint, 0.5 * (pa + pb), atol=1e-9)
@@ -211,10 +217,7 @@ def test_a_start_near_the_contact_finds_the_same_closest_points(seed):
     found = closest_approach(a, b, normal=guess, near=near)
     assert found.converged
     assert found.iterations <= 4
-    np.testing.assert_allclose(found.normal, n, atol=1e-9)
-    assert found.separation == pytest.approx(sep, abs=1e-12)
-    np.testing.assert_allclose(found.point_a, pa, atol=1e-9)
-    np.testing.assert_allclose(found.point_b, pb, atol=1e-9)
+    assert_closest(found, n, sep, pa, pb)
 
 
 def test_a_start_near_the_shallower_of_two_minima_still_finds_the_deeper():
