@@ -46,7 +46,9 @@ def children(monkeypatch):
     return made
 
 
-@pytest.mark.parametrize("make", [potato_sim, layer_sim], ids=["particle", "layer"])
+# the particle's case is slow (CI's budget): the layer's runs the same child writer
+@pytest.mark.parametrize("make", [pytest.param(potato_sim, marks=pytest.mark.slow), layer_sim],
+                         ids=["particle", "layer"])
 def test_saving_in_a_child_gives_the_file_of_saving_in_the_run(make, tmp_path, children):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)

@@ -395,6 +395,7 @@ def _interrupt_after_first_step(case, base_dir, path):
     assert open_results(path).sizes["step"] == 1
 
 
+@pytest.mark.slow      # CI budget: the results tests resume partial files in the default run
 def test_run_case_resumes_a_partial_file_to_the_uninterrupted_result(tmp_path):
     from thirdbody.sweep import run_case
 
