@@ -288,6 +288,9 @@ def test_a_run_resumed_after_step_2_ends_as_the_uninterrupted_one(row):
     blob = None
     for record, _, current in first.steps():
         first.records.append(record)
+        # each step's own increment (3 N over 4 steps), from the second (numbered 1) on
+        if record.step >= 1:
+            assert current.last_step.normal == pytest.approx(0.75, rel=1e-12)
         if record.step == 2:
             assert current.last_step is not None and current.last_step.gap < 0
             blob = first.snapshot(current)
@@ -658,6 +661,7 @@ def test_the_next_step_is_guessed_from_the_last_one_by_the_ratio_of_increments(l
 
 @pytest.mark.parametrize(("last", "step"), [
     (None, LoadStep("force", 1.0)),                                  # the first step
+    (_last()._replace(gap=math.nan), LoadStep("force", 3.0)),    # after the first step
     (_last(), LoadStep("force", 1.5)),                               # unloading: a reversal
     (_last(), LoadStep("force", 2.0)),                               # no increment
     (_last(), LoadStep("compression", 0.1)),                         # another kind

@@ -114,9 +114,11 @@ def _predicted(last: _LastStep | None, step: LoadStep, gap: float | None):
     change times the ratio of the load increments (a secant predictor), when both steps load
     the same way: the same kind and, if the plate slides in either, both slide in the same
     direction at a fixed normal load; else None (a reversal, a change of direction or of
-    kind, or the first step). A secant in a steady compression or sliding starts the first
-    pass 5 to 10 times closer to the equilibrium than the start poses do."""
-    if last is None or gap is None or last.kind != step.kind:
+    kind, or the first two steps: the first starts from no gap). In a compression of touching
+    spheres the guess starts the first pass about 7 times closer to the equilibrium than the
+    start poses do (scaled residual 0.024-0.043 against 0.17-0.33)."""
+    if (last is None or gap is None or not math.isfinite(last.gap)
+            or last.kind != step.kind):
         return None
     normal = step.value - last.value
     shift, before = np.asarray(step.shift, dtype=float), np.asarray(last.shift, dtype=float)
@@ -265,10 +267,11 @@ class NetworkEngine:
                               time.perf_counter() - t0, state.histories, state.plate_shift)
         previous = (0.0 if state.last_step is None or state.last_step.kind != step.kind
                     else state.last_step.value)
-        if state.gap is not None:
-            state.last_step = _LastStep(step.kind, step.value, step.value - previous,
-                                        tuple(float(v) for v in step.shift), result.translation,
-                                        result.rotation, result.gap - state.gap)
+        # kept from the first step too, for its load value (its gap change is unknown: NaN)
+        state.last_step = _LastStep(step.kind, step.value, step.value - previous,
+                                    tuple(float(v) for v in step.shift), result.translation,
+                                    result.rotation,
+                                    math.nan if state.gap is None else result.gap - state.gap)
         state.bodies, state.histories, state.gap = bodies, histories, result.gap
         state.displacement = displacement
         (state.plate_shift, state.sliding_distance, state.slide_gap,
