@@ -18,7 +18,7 @@ shares (contact detection, BEM solves, the Newton model), and the particle conta
 load; at the end the totals. A lattice touching at ``--gap 0`` with a spread of radii is a force
 network: the larger spheres press their neighbours along oblique normals.
 
-    .venv/bin/python benchmarks/cluster_lattice.py --sizes 8 --gap 0 --spread 0.02 --steps 20
+    .venv/bin/python benchmarks/cluster_lattice.py --sizes 8 --gap 0 --spread 5e-4 --steps 20
 
 ``--guess`` starts each step from the secant predictor a run uses (the last step's motion times
 the ratio of the load increments: ``thirdbody.network.run._predicted``); ``--guess both`` runs

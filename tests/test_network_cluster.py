@@ -799,6 +799,31 @@ def test_the_newton_solve_is_the_truncated_pseudo_inverse_with_or_without_the_lu
     assert np.allclose(X, np.linalg.pinv(J, rcond=1e-9) @ B, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("weak, free", [(3e-8, True), (1e-6, False)])
+def test_a_mode_below_1e7_of_the_stiffest_is_left_alone(weak, free):
+    """A sphere that slides at all its contacts keeps a turning mode at about 1e-8 of the group's
+    largest stiffness (100 touching spheres, the first of 20 compression steps): its step turned
+    it by up to 23 rad and stalled the attempt. Such a mode takes no step; one at 1e-6 (a rubber
+    particle among steel ones: 5e-6) is solved. Reference: the matrix is built from its own
+    singular values, the expected step from them."""
+    from thirdbody.network import cluster
+
+    rng = np.random.default_rng(5)
+    U = np.linalg.qr(rng.normal(size=(18, 18)))[0]
+    V = np.linalg.qr(rng.normal(size=(18, 18)))[0]
+    s = np.linspace(1.0, 0.1, 18)
+    s[7] = weak
+    J = U @ np.diag(s) @ V.T
+    B = rng.normal(size=18)
+    coefficients = U.T @ B / s
+    if free:
+        coefficients[7] = 0.0
+    X = cluster._least_norm(J, B)
+    assert np.allclose(X, V @ coefficients, rtol=1e-6, atol=1e-9 * np.abs(X).max())
+    assert abs(V[:, 7] @ X) == (pytest.approx(0.0, abs=1e-9) if free
+                                else pytest.approx(abs(U[:, 7] @ B) / weak, rel=1e-6))
+
+
 def test_a_convergence_error_names_a_contact_past_the_half_space_limit():
     """The end of a convergence error: the contact with the largest a/R when it is past the
     limit (the step is out of the contact model's range), nothing otherwise."""

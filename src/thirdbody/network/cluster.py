@@ -915,17 +915,21 @@ def _components(n: int, pairs: list[tuple[int, int]]) -> list[list[int]]:
 
 
 #: singular values of a group's scaled Newton matrix below this share of the largest are modes
-#: without stiffness: the step leaves them alone (a truncated pseudo-inverse)
-_RCOND = 1e-9
+#: without stiffness: the step leaves them alone (a truncated pseudo-inverse). At 1e-9, 100
+#: touching spheres failed their first compression step: a sphere sliding at its three contacts
+#: kept a turning mode at about 1e-8 of the largest stiffness, whose step of 0.8-23 rad set the
+#: trust region's common factor (10⁻³ to 10⁻⁹ for every other particle) until the attempt
+#: stalled; at 1e-7 that mode is left alone and the step converges in 31 passes
+_RCOND = 1e-7
 #: 0: the truncated pseudo-inverse; a positive value: the former Levenberg-Marquardt shift of
 #: the diagonal by this share of its largest entry (kept to show what the pseudo-inverse fixes)
 _LM = 0.0
 
 
 #: the LU solve replaces the truncated SVD when LAPACK's estimate of the reciprocal 1-norm
-#: condition number is above this: the 2-norm condition is then below n / _LU_RCOND (< 1e9 /
+#: condition number is above this: the 2-norm condition is then below n / _LU_RCOND (< 1 /
 #: :data:`_RCOND` for n < 1000), so no singular value would have been truncated
-_LU_RCOND = 1e-6
+_LU_RCOND = 1e-4
 #: False: always the SVD (kept to measure what the LU path saves)
 _LU = True
 
