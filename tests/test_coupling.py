@@ -629,3 +629,64 @@ def test_spence_stages_start_from_the_last_stage_stretched():
                               0.3)
     assert not _normal_growth(base, None, 1.2 * w0, None, base.shift + 1e-9, None, 0.3)
     assert not _normal_growth(base, None, None, (0.0, 0.0), None, None, 0.3)
+
+
+def test_a_particle_near_its_friction_limit_passes_loosely_to_the_same_step(monkeypatch):
+    """The particle's coupled passes solve their tangential halves loosely (the first pass to
+    COUPLING_LOOSE, each later one to COUPLING_FORCING times the last change), the shear
+    returned with the evaluation at the full tolerance. A tilted ellipsoid (ν = 0.3) sticking
+    at 0.99 and 0.999 of its friction limit, where force control leaves the force to the shift
+    search, gives the steps of passes solved at the full tolerance throughout: F'/(μF_N), the
+    forces and centroids within 1e-7 of them, the force and moment balance and the tangential
+    force summed here from the recorded tractions within the solver's tolerance; with fewer
+    shift-controlled solves and at most one more pass per evaluation."""
+    import thirdbody as tb
+    from thirdbody.bem import tangential
+    from thirdbody.particle import statics
+    from thirdbody.shapes import Ellipsoid
+
+    solves, passes = [0], []
+    shift_control, coupled = tangential._shift_control, statics.PairStatics._coupled
+
+    def counted(*args, **kwargs):
+        solves[0] += 1
+        return shift_control(*args, **kwargs)
+
+    def noted(self, ev, surfaces):
+        out = coupled(self, ev, surfaces)
+        passes.append(out.coupling_passes)
+        return out
+
+    monkeypatch.setattr(tangential, "_shift_control", counted)
+    monkeypatch.setattr(statics.PairStatics, "_coupled", noted)
+
+    def run(loose):
+        monkeypatch.setattr(statics.PairStatics, "COUPLING_LOOSE", loose)
+        solves[0], passes[:] = 0, []
+        sim = tb.Simulation(tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), tb.Material(1e9, 0.3),
+                                        20.0, 90.0),
+                            tb.Plates(0.49), tb.LinearRamp(stop=2.0, steps=2), resolution=30,
+                            maps_every=1, coupling=True)
+        return tb.particle_view(sim.run(), 0), solves[0], list(passes)
+
+    exact, exact_solves, exact_passes = run(None)
+    loose, loose_solves, loose_passes = run(1e-4)
+    demand = exact.demand_ratio.values[:, 0]
+    assert (demand > 0.99).all() and (demand < 1).all() and (exact.state.values == 0).all()
+    assert 0 < loose_solves < 0.8 * exact_solves
+    assert len(loose_passes) == len(exact_passes)
+    assert all(b <= a + 1 for a, b in zip(exact_passes, loose_passes, strict=True))
+    for name in ("demand_ratio", "tangential_force", "centroid", "plate_gap"):
+        x, y = exact[name].values, loose[name].values
+        np.testing.assert_allclose(y, x, rtol=0, atol=1e-7 * np.abs(x).max(), err_msg=name)
+    assert loose.moment_residual.values.max() < 1e-6
+    assert loose.force_residual.values.max() < 1e-6
+    assert loose.tangential_residual.values.max() < 1e-7       # Coulomb's law, 10 tol
+    # the tangential force summed here from each plate's recorded tractions: F' on the lower
+    # plate, -F' on the upper one
+    dA = float(loose.cell_size.values) ** 2
+    summed = loose.traction.sum(dim=("map_y", "map_x")).values * dA     # (step, plate, xy)
+    force = loose.tangential_force.values
+    scale = np.abs(force).max()
+    assert np.abs(summed[:, 1] - force).max() < 1e-7 * scale
+    assert np.abs(summed[:, 0] + force).max() < 1e-7 * scale

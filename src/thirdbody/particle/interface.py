@@ -235,7 +235,7 @@ class Interface:
                          previous: tuple[Window, TangentialContact] | None = None,
                          twist: float | None = None, coupling: bool = False,
                          restart: tuple[Window, TangentialContact] | None = None,
-                         ) -> TangentialContact:
+                         tol: float | None = None) -> TangentialContact:
         """Partial-slip solve with the prescribed tangential force (N, on the particle) at this
         interface, carrying the history of ``previous`` (its window and its step) when given.
         ``twist``: the plate's total rotation about the particle's vertical axis, rad (default:
@@ -261,7 +261,8 @@ class Interface:
             pressure = remap(p_step.normal.pressure, p_window, solution.window)
         return solve_tangential_from(start, solution.contact, mu, shift_guess=guess,
                                      force=np.asarray(force, dtype=float), previous=prev,
-                                     tol=self.tol, twist=twist, coupling=coupling,
+                                     tol=self.tol if tol is None else max(tol, self.tol),
+                                     twist=twist, coupling=coupling,
                                      previous_pressure=pressure if coupling else None)
 
 
