@@ -33,7 +33,7 @@ from ..bem.tangential import restart_traction, solve_tangential_from
 from ..material import Material
 from ..orientation import key
 from ..state import WarmStart
-from .surface import LOWER, UPPER, Surfaces
+from .surface import LOWER, UPPER, Surfaces, dilate
 
 __all__ = ["Interface", "InterfaceNormal", "Window", "count_spots", "remap"]
 
@@ -210,11 +210,11 @@ class Interface:
                 bound = max(2.0 * bound, 1.5 * delta)
                 continue
             # cells just outside the mask must not lie below the approach
-            ring = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool)) & ~mask
+            ring = dilate(mask, 3) & ~mask
             low = ring & (surfaces.gap(self.index, ring) <= delta)
             if low.any():
                 k = 2 * surfaces.stride + 1
-                extra |= ndimage.binary_dilation(low, structure=np.ones((k, k), dtype=bool))
+                extra |= dilate(low, k)
                 continue
             break
         else:  # pragma: no cover - the bound doubles each time
