@@ -634,23 +634,30 @@ def test_spence_stages_start_from_the_last_stage_stretched():
 def test_a_particle_near_its_friction_limit_passes_loosely_to_the_same_step(monkeypatch):
     """The particle's coupled passes solve their tangential halves loosely (the first pass to
     COUPLING_LOOSE, each later one to COUPLING_FORCING times the last change), the shear
-    returned with the evaluation at the full tolerance. A tilted ellipsoid (ν = 0.3) sticking
-    at 0.99 and 0.999 of its friction limit, where force control leaves the force to the shift
-    search, gives the steps of passes solved at the full tolerance throughout: F'/(μF_N), the
-    forces and centroids within 1e-7 of them, the force and moment balance and the tangential
-    force summed here from the recorded tractions within the solver's tolerance; with fewer
-    shift-controlled solves and at most one more pass per evaluation."""
+    returned with the evaluation at the full tolerance, and a pass whose last pass left no
+    stick cell goes straight to the shift search. A tilted ellipsoid (ν = 0.3) sticking at
+    0.99 and 0.999 of its friction limit, where force control leaves the force to the shift
+    search, gives the steps of passes solved at the full tolerance throughout, each trying
+    force control first: F'/(μF_N), the forces and centroids within 1e-7 of them, the force
+    and moment balance and the tangential force summed here from the recorded tractions within
+    the solver's tolerance; with fewer shift-controlled solves, fewer attempts of force
+    control, and at most one more pass per evaluation."""
     import thirdbody as tb
     from thirdbody.bem import tangential
-    from thirdbody.particle import statics
+    from thirdbody.particle import interface, statics
     from thirdbody.shapes import Ellipsoid
 
-    solves, passes = [0], []
+    solves, passes, attempts = [0], [], [0]
     shift_control, coupled = tangential._shift_control, statics.PairStatics._coupled
+    by_active_set = tangential._by_active_set
 
     def counted(*args, **kwargs):
         solves[0] += 1
         return shift_control(*args, **kwargs)
+
+    def attempted(step, **kwargs):
+        attempts[0] += kwargs.get("force") is not None
+        return by_active_set(step, **kwargs)
 
     def noted(self, ev, surfaces):
         out = coupled(self, ev, surfaces)
@@ -658,22 +665,25 @@ def test_a_particle_near_its_friction_limit_passes_loosely_to_the_same_step(monk
         return out
 
     monkeypatch.setattr(tangential, "_shift_control", counted)
+    monkeypatch.setattr(tangential, "_by_active_set", attempted)
     monkeypatch.setattr(statics.PairStatics, "_coupled", noted)
 
     def run(loose):
         monkeypatch.setattr(statics.PairStatics, "COUPLING_LOOSE", loose)
-        solves[0], passes[:] = 0, []
+        monkeypatch.setattr(interface, "_SEARCH_FIRST", loose is not None)
+        solves[0], passes[:], attempts[0] = 0, [], 0
         sim = tb.Simulation(tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), tb.Material(1e9, 0.3),
                                         20.0, 90.0),
                             tb.Plates(0.49), tb.LinearRamp(stop=2.0, steps=2), resolution=30,
                             maps_every=1, coupling=True)
-        return tb.particle_view(sim.run(), 0), solves[0], list(passes)
+        return tb.particle_view(sim.run(), 0), solves[0], list(passes), attempts[0]
 
-    exact, exact_solves, exact_passes = run(None)
-    loose, loose_solves, loose_passes = run(1e-4)
+    exact, exact_solves, exact_passes, exact_attempts = run(None)
+    loose, loose_solves, loose_passes, loose_attempts = run(1e-4)
     demand = exact.demand_ratio.values[:, 0]
     assert (demand > 0.99).all() and (demand < 1).all() and (exact.state.values == 0).all()
     assert 0 < loose_solves < 0.8 * exact_solves
+    assert loose_attempts < 0.5 * exact_attempts
     assert len(loose_passes) == len(exact_passes)
     assert all(b <= a + 1 for a, b in zip(exact_passes, loose_passes, strict=True))
     for name in ("demand_ratio", "tangential_force", "centroid", "plate_gap"):

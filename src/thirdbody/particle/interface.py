@@ -245,9 +245,13 @@ class Interface:
         and step, e.g. the last coupled pass), to start the iteration from: its slip cells on
         their new friction limit (:func:`~thirdbody.bem.tangential.restart_traction`)."""
         start = guess = None
+        search_first = False
         if restart is not None:
             r_window, r_step = restart
             guess = r_step.shift
+            # no stick cell left: force control would fail again (it needs one to carry the
+            # force); straight to the shift search from this step's shift
+            search_first = _SEARCH_FIRST and not r_step.stick.any()
             start = restart_traction(remap(r_step.traction, r_window, solution.window),
                                      remap(r_step.slip, r_window, solution.window) > 0.5,
                                      solution.contact, mu)
@@ -260,10 +264,14 @@ class Interface:
             prev = replace(p_step, traction=traction)
             pressure = remap(p_step.normal.pressure, p_window, solution.window)
         return solve_tangential_from(start, solution.contact, mu, shift_guess=guess,
+                                     search_first=search_first,
                                      force=np.asarray(force, dtype=float), previous=prev,
                                      tol=self.tol if tol is None else max(tol, self.tol),
                                      twist=twist, coupling=coupling,
                                      previous_pressure=pressure if coupling else None)
+
+
+_SEARCH_FIRST = True
 
 
 def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,
