@@ -167,8 +167,9 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
     sticks, so force control searches the shift. Started from the last step's shift and
     traction (``shift_guess``) the search starts at that shift and angle, goes to the root of
     the straightened force through it and brackets the root there: 5 solves at both angles
-    (with the angle's correction), against 10 and 9 from scratch. It returns the step the
-    search from scratch returns, to the solvers' tolerance."""
+    (with the angle's correction), against 10 and 9 from scratch; with the last search's
+    Jacobian too (``shift_jacobian``), Broyden's steps from that shift: 4. It returns the
+    step the search from scratch returns, to the solvers' tolerance."""
     from thirdbody.bem.tangential import restart_traction, solve_tangential_from
 
     e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
@@ -194,6 +195,21 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
     np.testing.assert_allclose(warm.shift, cold.shift, rtol=1e-6)
     np.testing.assert_allclose(warm.traction, cold.traction, rtol=0,
                                atol=1e-6 * MU * normal.pressure.max())
+    # with the last step's search Jacobian (the ellipse is turned: its shift's angle was
+    # corrected by Broyden's method at both angles)
+    assert first.search_jacobian is not None
+    before = len(solves)
+    newton = solve_tangential_from(start, normal, MU, force=Q, shift_guess=first.shift,
+                                   shift_jacobian=first.search_jacobian)
+    n_newton = len(solves) - before
+    assert 0 < n_newton < n_warm
+    check_coulomb(newton)
+    force = newton.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
+    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
+    np.testing.assert_allclose(newton.shift, cold.shift, rtol=1e-6)
+    np.testing.assert_allclose(newton.traction, cold.traction, rtol=0,
+                               atol=1e-6 * MU * normal.pressure.max())
+    assert newton.search_jacobian is not None
 
 
 def test_a_repeated_step_without_stick_cells_goes_straight_to_the_shift_search(monkeypatch):

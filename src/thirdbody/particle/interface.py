@@ -244,11 +244,12 @@ class Interface:
         ``restart``: a step of the same load under a slightly different pressure (its window
         and step, e.g. the last coupled pass), to start the iteration from: its slip cells on
         their new friction limit (:func:`~thirdbody.bem.tangential.restart_traction`)."""
-        start = guess = None
+        start = guess = jacobian = None
         search_first = False
         if restart is not None:
             r_window, r_step = restart
             guess = r_step.shift
+            jacobian = getattr(r_step, "search_jacobian", None)     # (older pickles: none)
             # no stick cell left: force control would fail again (it needs one to carry the
             # force); straight to the shift search from this step's shift
             search_first = _SEARCH_FIRST and not r_step.stick.any()
@@ -264,7 +265,7 @@ class Interface:
             prev = replace(p_step, traction=traction)
             pressure = remap(p_step.normal.pressure, p_window, solution.window)
         return solve_tangential_from(start, solution.contact, mu, shift_guess=guess,
-                                     search_first=search_first,
+                                     search_first=search_first, shift_jacobian=jacobian,
                                      force=np.asarray(force, dtype=float), previous=prev,
                                      tol=self.tol if tol is None else max(tol, self.tol),
                                      twist=twist, coupling=coupling,
