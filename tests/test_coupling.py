@@ -700,3 +700,57 @@ def test_a_particle_near_its_friction_limit_passes_loosely_to_the_same_step(monk
     scale = np.abs(force).max()
     assert np.abs(summed[:, 1] - force).max() < 1e-7 * scale
     assert np.abs(summed[:, 0] + force).max() < 1e-7 * scale
+
+
+def _elongated_and_two_spots(contact: str, n: int = 64):
+    """An ellipse (radii of curvature 10R and R along x and y) on 96 x 32 cells, or two spheres
+    R side by side, the right one 1 µm further (the spots differ), on n x n cells; ν = 0.3."""
+    mat = Material(E, 0.3)
+    a = hertz.sphere(1.0, R, mat.E_star).contact_radius
+    if contact == "ellipse":
+        grid = Grid((96, 32), 10.0 * a / 96)
+        X, Y = grid.mesh()
+        return mat, grid, X**2 / (20 * R) + Y**2 / (2 * R)
+    grid = Grid((n, n), 5.0 * a / n)
+    X, Y = grid.mesh()
+    d = 1.2 * a
+    return mat, grid, np.minimum(((X + d) ** 2 + Y**2) / (2 * R),
+                                 ((X - d) ** 2 + Y**2) / (2 * R) + 1e-6)
+
+
+@pytest.mark.parametrize("contact", ["ellipse", "two_spots"])
+def test_anderson_mixed_passes_reach_the_plain_alternations_step(monkeypatch, contact):
+    """Anderson acceleration of the passes (depth 2, Walker & Ni 2011) against the plain
+    alternation (depth 0), on an elongated contact and on two spots, for a Cattaneo step
+    (Q = 0.5 μW along x after W alone): the mixed passes reduce the coupled residual of the
+    third pass further and take no more passes; both steps meet the coupled normal
+    complementarity recomputed here from the fields (gap + K_zz p + K_zt τ − δ, within 2e-6 of
+    the largest displacement) and agree within 2e-5 of the largest pressure and traction."""
+    from thirdbody.bem import coupled, normal_operator
+
+    mu = 0.3
+    mat, grid, gap = _elongated_and_two_spots(contact)
+    pair = ElasticPair.rigid_plate(mat)
+    first = solve_coupled(gap, grid, mat, mu, force=1.0, tangential_force=(0.0, 0.0))
+    steps = {}
+    for depth in (0, 2):
+        monkeypatch.setattr(coupled, "_ANDERSON_DEPTH", depth)
+        steps[depth] = solve_coupled(gap, grid, mat, mu, force=1.0,
+                                     tangential_force=(0.5 * mu, 0.0), previous=first)
+    plain, mixed = steps[0], steps[2]
+    assert plain.coupling_passes >= 3
+    assert mixed.coupling_passes <= plain.coupling_passes
+    assert mixed.coupling_changes[2] < 0.9 * plain.coupling_changes[2]
+    for step in (plain, mixed):
+        p, tau = step.normal.pressure, step.traction
+        u = normal_operator(grid.shape, grid.spacing, pair.E_star)(p)
+        u = u + coupling_operator(grid.shape, grid.spacing, pair.coupling_modulus).normal(tau)
+        s = gap + u - step.normal.approach
+        scale = np.abs(u).max()
+        assert np.abs(s[step.normal.contact]).max() < 2e-6 * scale
+        assert -s[~step.normal.contact].min() < 2e-6 * scale
+        assert (p >= 0).all()
+        assert step.force == pytest.approx([0.5 * mu, 0.0], abs=1e-9)
+    pmax = plain.normal.pressure.max()
+    assert np.abs(mixed.normal.pressure - plain.normal.pressure).max() < 2e-5 * pmax
+    assert np.abs(mixed.traction - plain.traction).max() < 2e-5 * mu * pmax
