@@ -629,3 +629,128 @@ def test_spence_stages_start_from_the_last_stage_stretched():
                               0.3)
     assert not _normal_growth(base, None, 1.2 * w0, None, base.shift + 1e-9, None, 0.3)
     assert not _normal_growth(base, None, None, (0.0, 0.0), None, None, 0.3)
+
+
+def test_a_particle_near_its_friction_limit_passes_loosely_to_the_same_step(monkeypatch):
+    """The particle's coupled passes solve their tangential halves loosely (the first pass to
+    COUPLING_LOOSE, each later one to COUPLING_FORCING times the last change), the shear
+    returned with the evaluation at the full tolerance, and a pass whose last pass left no
+    stick cell goes straight to the shift search. A tilted ellipsoid (ν = 0.3) sticking at
+    0.99 and 0.999 of its friction limit, where force control leaves the force to the shift
+    search, gives the steps of passes solved at the full tolerance throughout, each trying
+    force control first: F'/(μF_N), the forces and centroids within 1e-7 of them, the force
+    and moment balance and the tangential force summed here from the recorded tractions within
+    the solver's tolerance; with fewer shift-controlled solves, fewer attempts of force
+    control, and at most one more pass per evaluation."""
+    import thirdbody as tb
+    from thirdbody.bem import tangential
+    from thirdbody.particle import interface, statics
+    from thirdbody.shapes import Ellipsoid
+
+    solves, passes, attempts = [0], [], [0]
+    shift_control, coupled = tangential._shift_control, statics.PairStatics._coupled
+    by_active_set = tangential._by_active_set
+
+    def counted(*args, **kwargs):
+        solves[0] += 1
+        return shift_control(*args, **kwargs)
+
+    def attempted(step, **kwargs):
+        attempts[0] += kwargs.get("force") is not None
+        return by_active_set(step, **kwargs)
+
+    def noted(self, ev, surfaces):
+        out = coupled(self, ev, surfaces)
+        passes.append(out.coupling_passes)
+        return out
+
+    monkeypatch.setattr(tangential, "_shift_control", counted)
+    monkeypatch.setattr(tangential, "_by_active_set", attempted)
+    monkeypatch.setattr(statics.PairStatics, "_coupled", noted)
+
+    def run(loose):
+        monkeypatch.setattr(statics.PairStatics, "COUPLING_LOOSE", loose)
+        monkeypatch.setattr(interface, "_SEARCH_FIRST", loose is not None)
+        solves[0], passes[:], attempts[0] = 0, [], 0
+        sim = tb.Simulation(tb.Particle(Ellipsoid((1e-3, 0.8e-3, 0.6e-3)), tb.Material(1e9, 0.3),
+                                        20.0, 90.0),
+                            tb.Plates(0.49), tb.LinearRamp(stop=2.0, steps=2), resolution=30,
+                            maps_every=1, coupling=True)
+        return tb.particle_view(sim.run(), 0), solves[0], list(passes), attempts[0]
+
+    exact, exact_solves, exact_passes, exact_attempts = run(None)
+    loose, loose_solves, loose_passes, loose_attempts = run(1e-4)
+    demand = exact.demand_ratio.values[:, 0]
+    assert (demand > 0.99).all() and (demand < 1).all() and (exact.state.values == 0).all()
+    assert 0 < loose_solves < 0.8 * exact_solves
+    assert loose_attempts < 0.5 * exact_attempts
+    assert len(loose_passes) == len(exact_passes)
+    assert all(b <= a + 1 for a, b in zip(exact_passes, loose_passes, strict=True))
+    for name in ("demand_ratio", "tangential_force", "centroid", "plate_gap"):
+        x, y = exact[name].values, loose[name].values
+        np.testing.assert_allclose(y, x, rtol=0, atol=1e-7 * np.abs(x).max(), err_msg=name)
+    assert loose.moment_residual.values.max() < 1e-6
+    assert loose.force_residual.values.max() < 1e-6
+    assert loose.tangential_residual.values.max() < 1e-7       # Coulomb's law, 10 tol
+    # the tangential force summed here from each plate's recorded tractions: F' on the lower
+    # plate, -F' on the upper one
+    dA = float(loose.cell_size.values) ** 2
+    summed = loose.traction.sum(dim=("map_y", "map_x")).values * dA     # (step, plate, xy)
+    force = loose.tangential_force.values
+    scale = np.abs(force).max()
+    assert np.abs(summed[:, 1] - force).max() < 1e-7 * scale
+    assert np.abs(summed[:, 0] + force).max() < 1e-7 * scale
+
+
+def _elongated_and_two_spots(contact: str, n: int = 64):
+    """An ellipse (radii of curvature 10R and R along x and y) on 96 x 32 cells, or two spheres
+    R side by side, the right one 1 µm further (the spots differ), on n x n cells; ν = 0.3."""
+    mat = Material(E, 0.3)
+    a = hertz.sphere(1.0, R, mat.E_star).contact_radius
+    if contact == "ellipse":
+        grid = Grid((96, 32), 10.0 * a / 96)
+        X, Y = grid.mesh()
+        return mat, grid, X**2 / (20 * R) + Y**2 / (2 * R)
+    grid = Grid((n, n), 5.0 * a / n)
+    X, Y = grid.mesh()
+    d = 1.2 * a
+    return mat, grid, np.minimum(((X + d) ** 2 + Y**2) / (2 * R),
+                                 ((X - d) ** 2 + Y**2) / (2 * R) + 1e-6)
+
+
+@pytest.mark.parametrize("contact", ["ellipse", "two_spots"])
+def test_anderson_mixed_passes_reach_the_plain_alternations_step(monkeypatch, contact):
+    """Anderson acceleration of the passes (depth 2, Walker & Ni 2011) against the plain
+    alternation (depth 0), on an elongated contact and on two spots, for a Cattaneo step
+    (Q = 0.5 μW along x after W alone): the mixed passes reduce the coupled residual of the
+    third pass further and take no more passes; both steps meet the coupled normal
+    complementarity recomputed here from the fields (gap + K_zz p + K_zt τ − δ, within 2e-6 of
+    the largest displacement) and agree within 2e-5 of the largest pressure and traction."""
+    from thirdbody.bem import coupled, normal_operator
+
+    mu = 0.3
+    mat, grid, gap = _elongated_and_two_spots(contact)
+    pair = ElasticPair.rigid_plate(mat)
+    first = solve_coupled(gap, grid, mat, mu, force=1.0, tangential_force=(0.0, 0.0))
+    steps = {}
+    for depth in (0, 2):
+        monkeypatch.setattr(coupled, "_ANDERSON_DEPTH", depth)
+        steps[depth] = solve_coupled(gap, grid, mat, mu, force=1.0,
+                                     tangential_force=(0.5 * mu, 0.0), previous=first)
+    plain, mixed = steps[0], steps[2]
+    assert plain.coupling_passes >= 3
+    assert mixed.coupling_passes <= plain.coupling_passes
+    assert mixed.coupling_changes[2] < 0.9 * plain.coupling_changes[2]
+    for step in (plain, mixed):
+        p, tau = step.normal.pressure, step.traction
+        u = normal_operator(grid.shape, grid.spacing, pair.E_star)(p)
+        u = u + coupling_operator(grid.shape, grid.spacing, pair.coupling_modulus).normal(tau)
+        s = gap + u - step.normal.approach
+        scale = np.abs(u).max()
+        assert np.abs(s[step.normal.contact]).max() < 2e-6 * scale
+        assert -s[~step.normal.contact].min() < 2e-6 * scale
+        assert (p >= 0).all()
+        assert step.force == pytest.approx([0.5 * mu, 0.0], abs=1e-9)
+    pmax = plain.normal.pressure.max()
+    assert np.abs(mixed.normal.pressure - plain.normal.pressure).max() < 2e-5 * pmax
+    assert np.abs(mixed.traction - plain.traction).max() < 2e-5 * mu * pmax

@@ -229,3 +229,24 @@ def test_the_curvature_allowance_of_a_quadratic_surface():
     assert out[3, 3] == 0.0 and out[3, 2] == pytest.approx(2.0)
     concave = _allowance(-(x**2))                    # a crest dips nowhere: no allowance
     assert not concave.any()
+
+
+@pytest.mark.parametrize("k", [1, 3, 5, 9])
+def test_dilation_by_a_square_is_every_cell_within_reach(k):
+    """The footprint's k x k dilation (two running maxima) against the definition, summed here
+    cell by cell: a cell is set when any set cell lies within (k - 1)/2 cells along both axes;
+    nothing wraps round or comes in from beyond the edges (set cells on every edge and a
+    corner, a lattice narrower than k)."""
+    from thirdbody.particle.surface import dilate
+
+    rng = np.random.default_rng(k)
+    reach = (k - 1) // 2
+    for shape in ((23, 31), (4, 40)):
+        mask = rng.random(shape) < 0.03
+        mask[0, 5] = mask[-1, 7] = mask[3, 0] = mask[2, -1] = mask[-1, -1] = True
+        expected = np.zeros(shape, dtype=bool)
+        for j, i in zip(*np.nonzero(mask), strict=True):
+            expected[max(j - reach, 0):j + reach + 1, max(i - reach, 0):i + reach + 1] = True
+        out = dilate(mask, k)
+        assert out.dtype == bool
+        np.testing.assert_array_equal(out, expected)

@@ -167,8 +167,9 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
     sticks, so force control searches the shift. Started from the last step's shift and
     traction (``shift_guess``) the search starts at that shift and angle, goes to the root of
     the straightened force through it and brackets the root there: 5 solves at both angles
-    (with the angle's correction), against 10 and 9 from scratch. It returns the step the
-    search from scratch returns, to the solvers' tolerance."""
+    (with the angle's correction), against 10 and 9 from scratch; with the last search's
+    Jacobian too (``shift_jacobian``), Broyden's steps from that shift: 4. It returns the
+    step the search from scratch returns, to the solvers' tolerance."""
     from thirdbody.bem.tangential import restart_traction, solve_tangential_from
 
     e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
@@ -194,6 +195,63 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
     np.testing.assert_allclose(warm.shift, cold.shift, rtol=1e-6)
     np.testing.assert_allclose(warm.traction, cold.traction, rtol=0,
                                atol=1e-6 * MU * normal.pressure.max())
+    # with the last step's search Jacobian (the ellipse is turned: its shift's angle was
+    # corrected by Broyden's method at both angles)
+    assert first.search_jacobian is not None
+    before = len(solves)
+    newton = solve_tangential_from(start, normal, MU, force=Q, shift_guess=first.shift,
+                                   shift_jacobian=first.search_jacobian)
+    n_newton = len(solves) - before
+    assert 0 < n_newton < n_warm
+    check_coulomb(newton)
+    force = newton.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
+    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
+    np.testing.assert_allclose(newton.shift, cold.shift, rtol=1e-6)
+    np.testing.assert_allclose(newton.traction, cold.traction, rtol=0,
+                               atol=1e-6 * MU * normal.pressure.max())
+    assert newton.search_jacobian is not None
+
+
+def test_a_repeated_step_without_stick_cells_goes_straight_to_the_shift_search(monkeypatch):
+    """``search_first``: a step repeated under a slightly different pressure (the turned ellipse
+    at 1.0005 times its load) whose last solve had no stick cell, at Q = 0.9999 μP, 20° from x.
+    Force control fails there (no stick cell carries the force), so skipping its attempt
+    returns the same step bit for bit, with one active-set solve under the force constraint
+    fewer (none) and the same shift-controlled solves; the force met to 1e-8 of |Q| (summed
+    from the tractions here) and Coulomb's law hold."""
+    import thirdbody.bem.tangential as tangential
+    from thirdbody.bem.tangential import restart_traction, solve_tangential_from
+
+    e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
+    first = solve_tangential(_turned_ellipse(), MU, force=0.9999 * MU * W_ELLIPSE * e)
+    assert first.stick.sum() == 0
+    grid = first.normal.grid
+    X, Y = grid.mesh()
+    u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
+    v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
+    normal = tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, first.normal.pair,
+                             force=1.0005 * W_ELLIPSE)
+    Q = 0.9999 * MU * normal.force * e
+    start = restart_traction(first.traction, first.slip, normal, MU)
+    calls = []
+    by_active_set = tangential._by_active_set
+
+    def counted(step, **kwargs):
+        calls.append("force" if kwargs.get("force") is not None else "shift")
+        return by_active_set(step, **kwargs)
+
+    monkeypatch.setattr(tangential, "_by_active_set", counted)
+    tried = solve_tangential_from(start, normal, MU, force=Q, shift_guess=first.shift)
+    tried_calls, calls[:] = list(calls), []
+    direct = solve_tangential_from(start, normal, MU, force=Q, shift_guess=first.shift,
+                                   search_first=True)
+    assert tried_calls.count("force") == 1 and calls.count("force") == 0
+    assert calls.count("shift") == tried_calls.count("shift") > 0
+    np.testing.assert_array_equal(direct.traction, tried.traction)
+    np.testing.assert_array_equal(direct.shift, tried.shift)
+    check_coulomb(direct)
+    force = direct.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
+    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
 
 
 @pytest.mark.parametrize("warm_fails", [False, True])

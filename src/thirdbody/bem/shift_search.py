@@ -38,12 +38,15 @@ _BROYDEN_STEPS = 8
 _BRACKET_MARGIN = 1.05
 #: jumps from a guessed shift (:func:`force_by_shift`) before bracketing from scratch
 _GUESS_JUMPS = 6
+#: a guessed shift with a Jacobian starts with Broyden's steps (:func:`_newton`)
+_GUESS_NEWTON = True
 
 
 def force_by_shift(step: _Step, force: np.ndarray, failure: str,
                    solve_at: Callable[..., TangentialContact], *,
                    guess: np.ndarray | None = None,
-                   start: np.ndarray | None = None) -> TangentialContact:
+                   start: np.ndarray | None = None,
+                   jacobian: np.ndarray | None = None) -> TangentialContact:
     """The step that transmits ``force`` (2,), N, found by displacement-controlled solves
     ``solve_at(step, shift, start)`` (shift: the plate's total shift, m; start: a starting
     traction or None), each started from the last one's traction (from scratch if that
@@ -52,8 +55,11 @@ def force_by_shift(step: _Step, force: np.ndarray, failure: str,
     slightly different pressure, e.g. the last coupled pass), and ``start`` its traction, Pa:
     the search then brackets the root around the guess, at the guess's angle, instead of
     from the full-sliding scale (falling back on that if no bracket is found there).
-    The step reports the CG iterations of all the solves."""
-    return _ShiftSearch(step, force, failure, solve_at).run(guess, start)
+    ``jacobian``: that step's search's last Jacobian (``search_jacobian`` of its step): the
+    search then first takes Broyden steps from the guess with it (:func:`_newton`).
+    The step reports the CG iterations of all the solves, and, when the shift's angle was
+    corrected by Broyden's method, its last Jacobian (``search_jacobian``)."""
+    return _ShiftSearch(step, force, failure, solve_at).run(guess, start, jacobian)
 
 
 class _ShiftSearch:
@@ -100,8 +106,11 @@ class _ShiftSearch:
         h = _straightened(f, q, cap) if cap > q else f - q
         return np.array([h, float(np.arctan2(t.force @ self.e_perp, t.force @ self.e))])
 
-    def run(self, guess: np.ndarray | None = None,
-            start: np.ndarray | None = None) -> TangentialContact:
+    def met(self, t: TangentialContact) -> bool:
+        return float(np.abs(t.force - self.Q).max()) <= self.ftol
+
+    def run(self, guess: np.ndarray | None = None, start: np.ndarray | None = None,
+            jacobian: np.ndarray | None = None) -> TangentialContact:
         e, e_perp, q, cap, ftol = self.e, self.e_perp, self.q, self.cap, self.ftol
         solve, along = self.solve, self.along
         s_perp = 0.0
@@ -109,6 +118,16 @@ class _ShiftSearch:
         if guess is not None:
             ds = np.asarray(guess, dtype=float) - self.step.prev_shift
             s_guess = float(ds @ e)
+            if s_guess > 0 and jacobian is not None and _GUESS_NEWTON:
+                # the repeated step's Jacobian: Broyden's steps from its shift
+                self.warm = start
+                t = solve(s_guess, float(ds @ e_perp))
+                found = t if self.met(t) else _newton(
+                    solve, self.mismatch, np.array([s_guess, float(ds @ e_perp) / s_guess]),
+                    t, np.asarray(jacobian, dtype=float), self.met)
+                if found is not None:
+                    t, J = (found, jacobian) if found is t else found
+                    return replace(t, iterations=self.iterations, search_jacobian=J)
             if s_guess > 0:
                 # the root of a nearby step: its angle, and a bracket a small stride around it
                 s_perp = float(ds @ e_perp)
@@ -128,10 +147,9 @@ class _ShiftSearch:
             probe = solve(s_best, s_perp + 1e-3 * s_best)
             # both components at once: Broyden's method from the Jacobian of the solves at hand
             met = _broyden(solve, self.mismatch, np.array([s_best, s_perp]), best, probe,
-                           1e-3 * s_best, self.points,
-                           lambda t: float(np.abs(t.force - self.Q).max()) <= ftol)
+                           1e-3 * s_best, self.points, self.met)
             if met is not None:
-                return replace(met, iterations=self.iterations)
+                return replace(met[0], iterations=self.iterations, search_jacobian=met[1])
             # else one component at a time: a secant step across e, then the root along e again
             slope = (float(probe.force @ e_perp) - perp) / (1e-3 * s_best)
             if slope == 0:
@@ -255,9 +273,9 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
     shift's length s and angle s_perp / s, the unknowns here. Its first Jacobian costs no
     solve beyond ``probe`` (at x + (0, h)): the secants to it and to the nearest other solve
     on the same line (the root search's iterates). ``met`` says when the force is met. Returns
-    the step, or None (a step that raised the mismatch tenfold, a shift along e that would
-    change sign, or ``_BROYDEN_STEPS`` spent: the caller then corrects one component at a
-    time).
+    (the step, the Jacobian of its Broyden step), or None (a step that raised the mismatch
+    tenfold, a shift along e that would change sign, or ``_BROYDEN_STEPS`` spent: the caller
+    then corrects one component at a time).
 
     Broyden, C. G. (1965). A class of methods for solving nonlinear simultaneous equations.
     Math. Comp. 19, 577-593."""
@@ -273,13 +291,21 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
     if s2 * x[0] <= 0:          # the angle s_perp / s is defined on one side of s = 0
         return None
     y, r = polar(*x), mismatch(t)
-    start = float(np.abs(r).max())
     steps = np.column_stack([polar(s2, x[1]) - y, polar(x[0], x[1] + h) - y])
     changes = np.column_stack([mismatch(t2) - r, mismatch(probe) - r])
     try:
         J = changes @ np.linalg.inv(steps)
     except np.linalg.LinAlgError:
         return None
+    return _newton(solve, mismatch, y, t, J, met)
+
+
+def _newton(solve, mismatch, y: np.ndarray, t, J: np.ndarray, met):
+    """Broyden's steps on ``mismatch`` from the step ``t`` at y = (s, s_perp / s) with the
+    Jacobian ``J`` (2x2, of the mismatch against y): (step, last Jacobian) once ``met``, or
+    None (see :func:`_broyden`)."""
+    r = mismatch(t)
+    start = float(np.abs(r).max())
     for _ in range(_BROYDEN_STEPS):
         try:
             dy = -np.linalg.solve(J, r)
@@ -289,7 +315,7 @@ def _broyden(solve, mismatch, x: np.ndarray, t, probe, h: float, points, met):
             return None
         t_new = solve(float(y[0] + dy[0]), float((y[0] + dy[0]) * (y[1] + dy[1])))
         if met(t_new):
-            return t_new
+            return t_new, J
         r_new = mismatch(t_new)
         if np.abs(r_new).max() > 10 * start:
             return None

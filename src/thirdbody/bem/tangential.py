@@ -96,6 +96,11 @@ class TangentialContact:
         Normal-tangential passes of :func:`~thirdbody.bem.solve_coupled` (0: solved uncoupled).
     coupling_changes : tuple of float
         The relative change of the pressure or traction in each of those passes.
+    search_jacobian : (2, 2) array or None
+        When force control searched the shift and corrected its angle by Broyden's method:
+        the last Jacobian of the straightened force and its angle against the shift's length
+        (m) and angle (rad), to start the search of a repeated step (``shift_jacobian`` of
+        :func:`solve_tangential_from`); else None.
     """
 
     traction: np.ndarray
@@ -116,6 +121,7 @@ class TangentialContact:
     twist_centre: tuple[float, float] = (0.0, 0.0)
     coupling_passes: int = 0
     coupling_changes: tuple[float, ...] = ()
+    search_jacobian: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def stick_area(self) -> float:
@@ -236,7 +242,8 @@ _OPTIONS = dict(solve_tangential.__kwdefaults__)
 
 
 def solve_tangential_from(start: np.ndarray | None, normal: NormalContact, mu: float, *,
-                          shift_guess: ArrayLike | None = None,
+                          shift_guess: ArrayLike | None = None, search_first: bool = False,
+                          shift_jacobian: np.ndarray | None = None,
                           **options: Any) -> TangentialContact:
     """:func:`solve_tangential` (``options``: its keyword arguments) with the iteration
     started from the traction ``start`` (2, ny, nx), Pa, instead of the coarse-to-fine
@@ -246,17 +253,26 @@ def solve_tangential_from(start: np.ndarray | None, normal: NormalContact, mu: f
     from :func:`restart_traction`. None: as :func:`solve_tangential`. ``shift_guess``: the
     plate's total shift (2,), m, of that repeated step; under force control, should the
     active set fail (near full sliding), the shift search starts there instead of from
-    scratch (:func:`~thirdbody.bem.shift_search.force_by_shift`). The start and the guess
-    change the iteration, not what is accepted: the same checks apply."""
+    scratch (:func:`~thirdbody.bem.shift_search.force_by_shift`). ``search_first`` (with a
+    ``shift_guess``): go to that search without trying the active set's force control first,
+    for a step whose repeated one had no stick cell left (force control, which needs one to
+    carry the force, fails there after several outer passes). ``shift_jacobian``: that
+    step's ``search_jacobian``, with which the search from the guess starts by Broyden's
+    steps. The start, the guess, ``search_first`` and the Jacobian change the iteration, not
+    what is accepted: the same checks apply."""
     step, force, shift = _validated(normal, mu, **{**_OPTIONS, **options})
     guess = None if shift_guess is None else _vector(shift_guess, "shift_guess")
-    return _dispatch(step, force, shift, start, guess)
+    return _dispatch(step, force, shift, start, guess, search_first and guess is not None,
+                     shift_jacobian)
 
 
 def _dispatch(step: _Step, force: np.ndarray | None, shift: np.ndarray | None,
-              start: np.ndarray | None, guess: np.ndarray | None = None) -> TangentialContact:
+              start: np.ndarray | None, guess: np.ndarray | None = None,
+              search_first: bool = False,
+              jacobian: np.ndarray | None = None) -> TangentialContact:
     """The case the load makes of the step, solved: ``force`` (2,), N, or the total ``shift``
-    (2,), m; ``guess``: a total shift (2,), m, near the one the force needs."""
+    (2,), m; ``guess``: a total shift (2,), m, near the one the force needs; ``search_first``:
+    force control by the shift search alone; ``jacobian``: the guess's search Jacobian."""
     if force is None:
         return _shift_control(step, shift, start)
     q = float(np.hypot(*force))
@@ -264,7 +280,7 @@ def _dispatch(step: _Step, force: np.ndarray | None, shift: np.ndarray | None,
         return _full_sliding(step, force / q)
     if step.cap == 0:
         return _frictionless(step)
-    return _force_control(step, force, start, guess)
+    return _force_control(step, force, start, guess, search_first, jacobian)
 
 
 @dataclass(frozen=True)
@@ -409,18 +425,25 @@ def _frictionless(step: _Step) -> TangentialContact:
 
 
 def _force_control(step: _Step, force: np.ndarray, start: np.ndarray | None = None,
-                   guess: np.ndarray | None = None) -> TangentialContact:
+                   guess: np.ndarray | None = None, search_first: bool = False,
+                   jacobian: np.ndarray | None = None) -> TangentialContact:
     """0 < |force| < μF_N: the active set with the force constraint, its answer's force checked
     from the tractions like Coulomb's law (the active set holds it to round-off); if either
     fails (typically close to full sliding, where the stick zone is a few cells or none), the
-    shift search (from the total shift ``guess``, m, when given)."""
+    shift search (from the total shift ``guess``, m, when given). ``search_first``: the shift
+    search without the active set's attempt; ``jacobian``: the search's first Jacobian."""
+    if search_first:
+        return force_by_shift(step, force, "tangential solver: the shift search from the "
+                              "repeated step's shift failed", _shift_control, guess=guess,
+                              start=start, jacobian=jacobian)
     t, failure = _by_active_set(step, force=force, start=start)
     if t is not None:
         if np.abs(t.force - force).max() <= max(step.tol, 1e-12) * step.cap:
             return t
         failure = (f"tangential solver: force ({t.force[0]:.6g}, {t.force[1]:.6g}) N "
                    f"misses the prescribed ({force[0]:.6g}, {force[1]:.6g}) N")
-    return force_by_shift(step, force, failure, _shift_control, guess=guess, start=start)
+    return force_by_shift(step, force, failure, _shift_control, guess=guess, start=start,
+                          jacobian=jacobian)
 
 
 def _shift_control(step: _Step, shift: np.ndarray,

@@ -33,7 +33,7 @@ from ..bem.tangential import restart_traction, solve_tangential_from
 from ..material import Material
 from ..orientation import key
 from ..state import WarmStart
-from .surface import LOWER, UPPER, Surfaces
+from .surface import LOWER, UPPER, Surfaces, dilate
 
 __all__ = ["Interface", "InterfaceNormal", "Window", "count_spots", "remap"]
 
@@ -210,11 +210,11 @@ class Interface:
                 bound = max(2.0 * bound, 1.5 * delta)
                 continue
             # cells just outside the mask must not lie below the approach
-            ring = ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool)) & ~mask
+            ring = dilate(mask, 3) & ~mask
             low = ring & (surfaces.gap(self.index, ring) <= delta)
             if low.any():
                 k = 2 * surfaces.stride + 1
-                extra |= ndimage.binary_dilation(low, structure=np.ones((k, k), dtype=bool))
+                extra |= dilate(low, k)
                 continue
             break
         else:  # pragma: no cover - the bound doubles each time
@@ -235,7 +235,7 @@ class Interface:
                          previous: tuple[Window, TangentialContact] | None = None,
                          twist: float | None = None, coupling: bool = False,
                          restart: tuple[Window, TangentialContact] | None = None,
-                         ) -> TangentialContact:
+                         tol: float | None = None) -> TangentialContact:
         """Partial-slip solve with the prescribed tangential force (N, on the particle) at this
         interface, carrying the history of ``previous`` (its window and its step) when given.
         ``twist``: the plate's total rotation about the particle's vertical axis, rad (default:
@@ -244,10 +244,15 @@ class Interface:
         ``restart``: a step of the same load under a slightly different pressure (its window
         and step, e.g. the last coupled pass), to start the iteration from: its slip cells on
         their new friction limit (:func:`~thirdbody.bem.tangential.restart_traction`)."""
-        start = guess = None
+        start = guess = jacobian = None
+        search_first = False
         if restart is not None:
             r_window, r_step = restart
             guess = r_step.shift
+            jacobian = getattr(r_step, "search_jacobian", None)     # (older pickles: none)
+            # no stick cell left: force control would fail again (it needs one to carry the
+            # force); straight to the shift search from this step's shift
+            search_first = _SEARCH_FIRST and not r_step.stick.any()
             start = restart_traction(remap(r_step.traction, r_window, solution.window),
                                      remap(r_step.slip, r_window, solution.window) > 0.5,
                                      solution.contact, mu)
@@ -260,9 +265,14 @@ class Interface:
             prev = replace(p_step, traction=traction)
             pressure = remap(p_step.normal.pressure, p_window, solution.window)
         return solve_tangential_from(start, solution.contact, mu, shift_guess=guess,
+                                     search_first=search_first, shift_jacobian=jacobian,
                                      force=np.asarray(force, dtype=float), previous=prev,
-                                     tol=self.tol, twist=twist, coupling=coupling,
+                                     tol=self.tol if tol is None else max(tol, self.tol),
+                                     twist=twist, coupling=coupling,
                                      previous_pressure=pressure if coupling else None)
+
+
+_SEARCH_FIRST = True
 
 
 def _check_half_space(contact: np.ndarray, window: Window, surfaces: Surfaces,

@@ -143,7 +143,8 @@ class Member:
         return sides, demand
 
     def _solve_sides(self, ev: Evaluation, history: dict, twist: float | None,
-                     warm: dict | None = None) -> dict[str, TangentialContact]:
+                     warm: dict | None = None,
+                     tol: float | None = None) -> dict[str, TangentialContact]:
         sides, demand = self._sides(ev)
         out = {}
         for side, sol, sign, mu in sides:
@@ -151,16 +152,16 @@ class Member:
             # the last coupled pass's step (if any) starts this one
             out[side] = self.interfaces[side].solve_tangential(
                 sol, mu, force, history.get(side), twist=twist, coupling=self.coupling,
-                restart=warm.get(side) if warm else None)
+                restart=warm.get(side) if warm else None, tol=tol)
         return out
 
-    def _shear(self, ev: Evaluation,
-               warm: dict | None = None) -> dict[str, TangentialContact]:
+    def _shear(self, ev: Evaluation, warm: dict | None = None,
+               tol: float | None = None) -> dict[str, TangentialContact]:
         """The tangential steps a coupled evaluation is solved with (no history written);
         ``warm``: {side: (window, step)} of the last pass, to start from."""
         orientation, history = self.shear_history
         return self._solve_sides(ev, history if orientation == key(ev.rotation) else {}, None,
-                                 warm)
+                                 warm, tol)
 
     def tangential(self, ev: Evaluation, state: ParticleState) -> dict[str, TangentialContact]:
         """Partial slip at both plates with the forces ±F'; if the tractions leave a twisting
