@@ -421,3 +421,45 @@ def test_the_shift_increments_rows_are_the_derivatives_of_the_evaluated_incremen
     error = np.abs(rows - fd) / np.where(rotation, 1e-3, 1.0)
     assert (error <= np.where(rotation, 1e-3, 1e-8)).all(), error
     assert np.abs(fd[:, rotation[0]]).max() > 1e-4 and np.abs(fd).max() > 0.1
+
+
+@pytest.mark.parametrize("both_ways", [True, False])
+def test_the_stacked_laws_at_the_edges_are_the_per_contact_laws(monkeypatch, both_ways):
+    """The cases the random contacts miss, against the per-contact law: a contact that carries
+    nothing (k₀ = 0 with μ > 0: frictionless, the slide branch), an open contact's spring with
+    a tangential stiffness but μ = 0, or a stiffness of 0.5 N/m (unit-free: a threshold at
+    1 N/m would pass the springs of real contacts), every contact with no predicted motion
+    (ds = 0: a sliding contact goes on along its slip, a stick one stays on its stick
+    branch)."""
+    monkeypatch.setattr(stiffness, "_TANGENT_BOTH_WAYS", both_ways)
+    rng = np.random.default_rng(23)
+    models = [m for m in random_contacts(rng, 12) if m.mu > 0]
+    n = np.array([0.0, 0.6, 0.8])
+    models += [
+        ContactModel.of(normal=n, point=np.zeros(3), centre_a=-n, centre_b=n, normal_force=0.0,
+                        tangential_force=np.zeros(3), twist_moment=0.0, approach=0.0,
+                        area=1e-8, stick_area=1e-8, mu=0.4, slip=np.zeros(3),
+                        compliance=5e-9, torsion=2.6e-9, curvature_a=np.zeros((3, 3)),
+                        curvature_b=np.zeros((3, 3)), sliding=False),
+        ContactModel.spring(normal=n, point=np.zeros(3), centre_a=-n, centre_b=n,
+                            stiffness=1e6, tangential=2e5, mu=0.0),
+        ContactModel.spring(normal=n, point=np.zeros(3), centre_a=-n, centre_b=n,
+                            stiffness=1e6, tangential=0.5, mu=0.3)]
+    assert models[-3].k_stick == 0 and models[-3].mu > 0
+    stack = ModelStack(models)
+    count = len(models)
+    for ds, dN in ((np.zeros((count, 3)), np.zeros(count)),
+                   (np.array([(I3 - np.outer(m.normal, m.normal)) @ rng.standard_normal(3)
+                              for m in models]) * 1e-8, -0.5 * stack.normal_force)):
+        laws = stack.laws(ds, dN)
+        for k, m in enumerate(models):
+            S, g, offset, slide = reference_law(m, ds[k], dN[k])
+            np.testing.assert_allclose(laws.stiffness[k], S, rtol=1e-12, atol=1e-30)
+            np.testing.assert_allclose(laws.g[k], g, rtol=1e-12, atol=1e-30)
+            np.testing.assert_allclose(laws.offset[k], offset, rtol=1e-12, atol=1e-30)
+            assert laws.slide[k] == slide, k
+    assert any(m.sliding for m in models) and any(not m.sliding for m in models[:-3])
+    # the elastic predictor's arrays have the laws' shapes and types
+    elastic = stack.elastic()
+    assert elastic.g.shape == (count, 3) and elastic.offset.shape == (count, 3)
+    assert elastic.slide.dtype == bool and elastic.slide.shape == (count,)
