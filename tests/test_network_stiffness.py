@@ -267,6 +267,10 @@ def test_an_open_contacts_spring_carries_nothing_and_has_the_given_stiffnesses()
     np.testing.assert_array_equal(spring.point, np.ones(3))
     np.testing.assert_array_equal(spring.centre_b, 2 * np.ones(3))
     assert not spring.curvature_a.any() and not spring.curvature_b.any()
+    # by default frictionless, without a tangential stiffness
+    plain = ContactModel.spring(normal=n, point=np.ones(3), centre_a=np.zeros(3),
+                                centre_b=2 * np.ones(3), stiffness=3e6)
+    assert (plain.k_stick, plain.k_loading, plain.mu) == (0.0, 0.0, 0.0)
 
 
 @pytest.mark.parametrize("q", [0.05, 0.4, 0.9])
@@ -290,6 +294,9 @@ def test_the_stick_contacts_dT_dN_is_the_derivative_of_cattaneo_mindlin(q):
     from dataclasses import replace
     model = replace(model, normal_force=N, mu=mu, tangential_force=q * mu * N * direction)
     np.testing.assert_allclose(model._stick_normal(), slope * direction, rtol=1e-6)
+    # at the cone (rounded past it), fully sliding: T = μN, dT/dN = μ along T
+    at_cone = replace(model, tangential_force=mu * N * (1 + 1e-12) * direction)
+    np.testing.assert_allclose(at_cone._stick_normal(), mu * direction, rtol=1e-9)
     # no force, no friction or no load: nothing
     for changes in ({"tangential_force": np.zeros(3)}, {"mu": 0.0}, {"normal_force": 0.0}):
         assert not replace(model, **changes)._stick_normal().any()
@@ -459,7 +466,29 @@ def test_the_stacked_laws_at_the_edges_are_the_per_contact_laws(monkeypatch, bot
             np.testing.assert_allclose(laws.offset[k], offset, rtol=1e-12, atol=1e-30)
             assert laws.slide[k] == slide, k
     assert any(m.sliding for m in models) and any(not m.sliding for m in models[:-3])
+    np.testing.assert_array_equal(stack.normal, [m.normal for m in models])
     # the elastic predictor's arrays have the laws' shapes and types
     elastic = stack.elastic()
     assert elastic.g.shape == (count, 3) and elastic.offset.shape == (count, 3)
     assert elastic.slide.dtype == bool and elastic.slide.shape == (count,)
+
+
+def test_the_approach_row_is_taken_at_the_first_touch():
+    """Two spheres: their overlap R_a + R_b − |c_b − c_a| does not change when either turns
+    about its centre. The pressure centroid may lie off the line of centres (here 20 µm: a
+    contact's tractions are not symmetric), the closest points of the undeformed surfaces
+    (``touch``) do not: the approach row's rotation columns are zero, its translation columns
+    ∓n (central differences of the overlap)."""
+    from dataclasses import replace
+
+    rng = np.random.default_rng(29)
+    model, g = two_spheres(rng, T0=np.array([0.3, -0.2, 0.25]), m0=0.0)
+    n0 = g["n0"]
+    side = np.cross(n0, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    model = replace(model, point=model.point + 2e-5 * side, touch=model.point)
+    row = ModelStack([model]).approach_rows[0]
+    np.testing.assert_allclose(row, np.concatenate([n0, np.zeros(3), -n0, np.zeros(3)]),
+                               rtol=0, atol=1e-12)
+    # at the pressure centroid instead the rotations would move it by n·(dφ × 20 µm side)
+    assert np.linalg.norm(np.cross(side, n0)) * 2e-5 > 1e-6
