@@ -492,3 +492,14 @@ def test_the_approach_row_is_taken_at_the_first_touch():
                                rtol=0, atol=1e-12)
     # at the pressure centroid instead the rotations would move it by n·(dφ × 20 µm side)
     assert np.linalg.norm(np.cross(side, n0)) * 2e-5 > 1e-6
+
+
+def test_the_single_pair_cross_product_and_skew_are_numpys():
+    """:func:`stiffness.cross` (the cluster's pair kinematics) and :func:`skew` against
+    numpy's cross product, on vectors with every component non-zero."""
+    rng = np.random.default_rng(31)
+    for _ in range(5):
+        u, v = rng.standard_normal(3), rng.standard_normal(3)
+        np.testing.assert_allclose(stiffness.cross(u, v), np.cross(u, v), rtol=1e-14,
+                                   atol=1e-15)
+        np.testing.assert_allclose(skew(u) @ v, np.cross(u, v), rtol=1e-14, atol=1e-15)
