@@ -503,3 +503,35 @@ def test_the_single_pair_cross_product_and_skew_are_numpys():
         np.testing.assert_allclose(stiffness.cross(u, v), np.cross(u, v), rtol=1e-14,
                                    atol=1e-15)
         np.testing.assert_allclose(skew(u) @ v, np.cross(u, v), rtol=1e-14, atol=1e-15)
+
+
+def test_laws_where_takes_the_other_laws_row_by_row():
+    """:meth:`TangentialLaws.where` (the cluster's active set mixes branches so): every array
+    from ``other`` on the masked contacts and from ``self`` on the rest."""
+    rng = np.random.default_rng(37)
+
+    def laws(slide):
+        return stiffness.TangentialLaws(rng.standard_normal((4, 3, 3)),
+                                        rng.standard_normal((4, 3)),
+                                        rng.standard_normal((4, 3)), np.full(4, slide))
+
+    mine, other = laws(False), laws(True)
+    mask = np.array([True, False, False, True])
+    mixed = mine.where(mask, other)
+    for k in range(4):
+        source = other if mask[k] else mine
+        np.testing.assert_array_equal(mixed.stiffness[k], source.stiffness[k])
+        np.testing.assert_array_equal(mixed.g[k], source.g[k])
+        np.testing.assert_array_equal(mixed.offset[k], source.offset[k])
+        assert mixed.slide[k] == source.slide[k]
+
+
+def test_an_empty_stack_has_the_shapes_of_no_contacts():
+    """A cluster pass with no contact at all still stacks its (zero) contacts: every array
+    keeps its trailing shape, so the Newton step's sums over contacts are empty, not
+    misshaped."""
+    stack = ModelStack([])
+    assert stack.tangential_force.shape == (0, 3) and stack.normal_force.shape == (0,)
+    assert stack.arm_a.shape == (0, 3) and stack.approach_rows.shape == (0, 12)
+    assert stack.base_a.shape == (0, 6, 12) and stack.wrench_b.shape == (0, 6)
+    assert stack.laws(np.zeros((0, 3)), np.zeros(0)).stiffness.shape == (0, 3, 3)
