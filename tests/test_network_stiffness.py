@@ -247,6 +247,13 @@ def test_a_solved_contacts_model_holds_the_textbook_stiffnesses():
     T = common["tangential_force"]
     np.testing.assert_allclose(still.slip_direction, T / np.linalg.norm(T), rtol=1e-14)
     assert still.k_across == pytest.approx(k0, rel=1e-14)
+    # sliding in pure torsion (every cell slips round the centre): no mean slip and no net
+    # force, so no direction is preferred; the model slides along some unit tangent, k0 across
+    spin = ContactModel.of(**{**common, "tangential_force": np.zeros(3)}, slip=3e-7 * n,
+                           sliding=True)
+    assert spin.sliding and spin.k_across == pytest.approx(k0, rel=1e-14)
+    assert np.linalg.norm(spin.slip_direction) == pytest.approx(1.0, rel=1e-14)
+    assert abs(spin.slip_direction @ n) < 1e-15
     # frictionless, or not pressed: no tangential stiffness
     for changes in ({"mu": 0.0}, {"normal_force": 0.0}):
         free = ContactModel.of(**{**common, **changes, "slip": slip, "sliding": True})
