@@ -884,6 +884,7 @@ def test_a_guess_of_no_motion_is_a_load_increment_off_and_is_dropped(two_steps):
     ((np.zeros((3, 3)), np.zeros((2, 3)), None), r"guess translation must be a finite \(2, 3\)"),
     ((np.zeros((2, 3)), np.full((2, 3), np.nan), None), r"guess rotation must be a finite"),
     ((np.zeros((2, 3)), np.zeros((2, 3)), -1.0), r"guess gap must be a finite number > 0"),
+    ((np.zeros((2, 3)), np.zeros((2, 3)), 0.0), r"guess gap must be a finite number > 0"),
     ((np.zeros((2, 3)),), r"guess must be \(translation"),
 ])
 def test_a_bad_guess_names_the_field(guess, match):

@@ -77,27 +77,30 @@ def test_the_merit_is_half_the_sum_of_the_squared_scaled_residuals():
 @pytest.mark.parametrize(("plate_normal", "expected"), [(3.5, 0.3), (4.0, 0.5), (2.6, 0.3)])
 def test_the_first_phase_measures_forces_and_the_plate_over_the_scale(plate_normal, expected):
     """The first phase's test: the largest of |F| over the scale (2 N) and the plate's error
-    over the same scale, moments left out (the second particle's moment would be 2.5)."""
-    ev = state([[0.2, -0.6, 0.0], [0.0, 0.1, 0.0]], [[0.0] * 3, [0.0, 0.0, 0.02]],
+    over the same scale, moments left out (the second particle's would be 2.5 over its size)."""
+    ev = state([[0.2, -0.6, 0.0], [0.0, 0.1, 0.0]], [[0.0] * 3, [0.02, 0.0, 0.02]],
                plate_normal)
     assert cluster._force_residual(problem(3.0), ev, 2.0) == pytest.approx(expected, rel=1e-14)
+    # under gap control the plate has no force to meet: the forces alone
+    assert cluster._force_residual(problem(), ev, 2.0) == pytest.approx(0.3, rel=1e-14)
 
 
 def test_an_attempt_stalls_when_its_last_passes_do_not_halve_the_best_before():
     window = cluster._STALL
     assert not cluster._stalled([(1.0,)] * window)        # too few passes to tell
-    before = [(3.0,), (1.0,), (2.0,)]
-    assert cluster._stalled(before + [(0.6,)] * window)
-    assert not cluster._stalled(before + [(0.6,)] * (window - 1) + [(0.5,)])
-    assert not cluster._stalled(before + [(0.4,)] + [(0.6,)] * (window - 1))
+    before = [(6.0,), (2.0,), (4.0,)]                     # best 2: half of it is 1
+    assert cluster._stalled(before + [(1.2,)] * window)
+    assert not cluster._stalled(before + [(1.2,)] * (window - 1) + [(1.0,)])
+    assert not cluster._stalled(before + [(0.8,)] + [(1.2,)] * (window - 1))
     # only the best before the window counts, not the first
-    assert not cluster._stalled([(1.0,), (1.0,), (3.0,)] + [(0.49,)] * window)
+    assert not cluster._stalled([(2.0,), (2.0,), (6.0,)] + [(0.99,)] * window)
 
 
-def terms(d, *, bem, kn, sigma, N):
-    """Made-up terms whose approach changes by ``d`` under any step."""
-    d = np.asarray(d, dtype=float)
-    return NS(approach_change=lambda step, dh: (d, None), bem=np.asarray(bem),
+def terms(d, *, bem, kn, sigma, N, plate=(0.0, 0.0)):
+    """Made-up terms whose approach changes by ``d`` under any step, and by ``plate`` times
+    the plate's move dh (a contact with the upper plate: −1)."""
+    d, plate = np.asarray(d, dtype=float), np.asarray(plate, dtype=float)
+    return NS(approach_change=lambda step, dh: (d + plate * dh, None), bem=np.asarray(bem),
               kn=np.asarray(kn, dtype=float), sigma=np.asarray(sigma, dtype=float),
               N=np.asarray(N, dtype=float))
 
@@ -156,3 +159,11 @@ def test_the_trust_region_scales_the_whole_step_by_its_tightest_limit():
                     N=[0.0, 0.0])
     assert not cluster._limit(problem(), opening, np.array([True, True]), 2.0, small, dh,
                               rho)[2]
+    # the plate's move counts: coming down 4 µm onto a solved upper contact, k_n 4 µm = 4 N
+    # against ρ max(N, scale) = 1 N: 0.25 of the step and of dh
+    upper = terms([0.0, 0.0], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                  N=[0.5, 0.0], plate=[-1.0, 0.0])
+    out, out_dh, clipped = cluster._limit(problem(), upper, np.array([True, True]), 2.0, small,
+                                          -4e-6, rho)
+    assert clipped and out_dh == pytest.approx(-1e-6, rel=1e-14)
+    np.testing.assert_allclose(out, 0.25 * small, rtol=1e-14)
