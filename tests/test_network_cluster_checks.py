@@ -6,6 +6,7 @@ force scale, a moment over the force scale times the particle's size, the plate'
 over F_N). Numbers are chosen so that each term is the largest in turn and no two quantities
 the code could confuse (a size and its inverse, the force scale and F_N) are equal."""
 
+import math
 from types import SimpleNamespace as NS
 
 import numpy as np
@@ -167,3 +168,28 @@ def test_the_trust_region_scales_the_whole_step_by_its_tightest_limit():
                                           -4e-6, rho)
     assert clipped and out_dh == pytest.approx(-1e-6, rel=1e-14)
     np.testing.assert_allclose(out, 0.25 * small, rtol=1e-14)
+
+
+def test_the_first_gap_under_force_control_is_hertz_at_both_plates():
+    """One sphere (R = 1 mm, E* = E/(1 − ν²)) whose top is below the plate: F_N through two
+    Hertz contacts with rigid plates in series, F = (4/3) E* √R δ^(3/2) at each, so the first
+    gap is the top less 2δ. Two equal spheres of the same top share F_N: δ at F_N/2. A plate
+    already pressing on the top is kept."""
+    import thirdbody as tb
+    from thirdbody.network import Body
+    from thirdbody.shapes import Sphere
+
+    R, F = 1e-3, 2.5
+    mat = tb.Material(2e9, 0.25)
+    e_star = 2e9 / (1 - 0.25**2)
+
+    def delta(force):
+        return (force / (4 / 3 * e_star * math.sqrt(R))) ** (2 / 3)
+
+    one = NS(start=[Body(Sphere(R), mat, centre=(0.0, 0.0, 1.5 * R))], force=F)
+    top = 2.5 * R
+    assert cluster._first_gap(one, 3 * R) == pytest.approx(top - 2 * delta(F), rel=1e-9)
+    assert cluster._first_gap(one, 2.4 * R) == 2.4 * R
+    two = NS(start=[Body(Sphere(R), mat, centre=(x, 0.0, 1.5 * R)) for x in (0.0, 3 * R)],
+             force=F)
+    assert cluster._first_gap(two, 3 * R) == pytest.approx(top - 2 * delta(F / 2), rel=1e-9)
