@@ -7,6 +7,7 @@
 #               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`,
 #               `make bench-layer`,
 #               `make mutation` (mutmut over the particle physics),
+#               `make mutation-network` (mutmut over the dense network's model and solver),
 #               `make docs` (the documentation site into site/; `make test` builds it too)
 PYTHON ?= python3
 VENV   ?= .venv
@@ -14,7 +15,7 @@ BIN    := $(VENV)/bin
 OUT    ?= out
 
 .PHONY: demo hertz fig2 fig3 fig4 fig5 layer layer-hertz shear sweep test test-all test-fast lint docs bench \
-	bench-tangential bench-simulation bench-sweep bench-layer mutation clean venv
+	bench-tangential bench-simulation bench-sweep bench-layer mutation mutation-network clean venv
 
 $(BIN)/activate:
 	$(PYTHON) -m venv $(VENV)
@@ -105,6 +106,32 @@ bench-sweep: $(VENV)/.installed-test
 mutation: $(VENV)/.installed-mutation
 	$(BIN)/mutmut run --max-children 2 || true
 	$(BIN)/mutmut results
+
+# mutation testing of the dense network (network/stiffness.py, network/cluster.py) in a scratch
+# copy whose [tool.mutmut] is tests/mutmut-network.toml (docs/development/mutation.md);
+# MUTANTS picks some by name (`make mutation-network MUTANTS='thirdbody.network.stiffness*'`),
+# MUTATION_TESTS replaces the test files it runs, MUTATION_JOBS is the number of workers
+MUTATION_NETWORK ?= build/mutation-network
+MUTATION_JOBS ?= 1
+MUTATION_TESTS ?=
+MUTANTS ?=
+mutation-network: $(VENV)/.installed-mutation
+	mkdir -p $(MUTATION_NETWORK)
+	rm -rf $(MUTATION_NETWORK)/src $(MUTATION_NETWORK)/tests $(MUTATION_NETWORK)/examples
+	cp -rp src tests examples $(MUTATION_NETWORK)/
+	cat tests/_mutmut_network_conftest.py >> $(MUTATION_NETWORK)/tests/conftest.py
+	$(BIN)/python -c "import re, sys; text = open('pyproject.toml').read(); \
+		section = open('tests/mutmut-network.toml').read().strip(); \
+		tests = ', '.join(repr(t) for t in sys.argv[2:]); \
+		section = re.sub(r'(?ms)^pytest_add_cli_args_test_selection = .*?\]', \
+		lambda m: 'pytest_add_cli_args_test_selection = [' + tests + ']', section) \
+		if tests else section; \
+		open(sys.argv[1], 'w').write(re.sub(r'\[tool\.mutmut\].*?(?=\n\[|\Z)', \
+		lambda m: section, text, flags=re.S))" $(MUTATION_NETWORK)/pyproject.toml \
+		$(MUTATION_TESTS)
+	cd $(MUTATION_NETWORK) && $(abspath $(BIN))/mutmut run --max-children $(MUTATION_JOBS) \
+		$(MUTANTS) || true
+	cd $(MUTATION_NETWORK) && $(abspath $(BIN))/mutmut results
 
 clean:
 	rm -rf $(VENV) $(OUT) build site src/*.egg-info .pytest_cache mutants

@@ -889,10 +889,27 @@ def test_a_guess_far_from_equilibrium_is_dropped_and_the_step_is_the_unguessed_o
     assert np.array_equal(dropped.rotation, plain.rotation)
 
 
+def test_a_guess_of_no_motion_is_a_load_increment_off_and_is_dropped(two_steps):
+    """Guessing no motion at the start gap, the first pass evaluates the start poses, where the
+    plate carries the last step's 1 N of the 1.5 N asked: a residual of (1.5 − 1)/1.5 = 1/3,
+    above GUESS_LIMIT (the steps of a compression begin at their load increment), so the step
+    starts again from there as without a guess, one pass more."""
+    from thirdbody.network.cluster import GUESS_LIMIT
+
+    start, plain = two_steps
+    assert GUESS_LIMIT < 1 / 3
+    still = solve_cluster(**start, guess=(np.zeros((2, 3)), np.zeros((2, 3)),
+                                          start["gap_start"]))
+    assert still.iterations == plain.iterations + 1
+    assert np.array_equal(still.translation, plain.translation)
+    assert still.gap == plain.gap
+
+
 @pytest.mark.parametrize(("guess", "match"), [
     ((np.zeros((3, 3)), np.zeros((2, 3)), None), r"guess translation must be a finite \(2, 3\)"),
     ((np.zeros((2, 3)), np.full((2, 3), np.nan), None), r"guess rotation must be a finite"),
     ((np.zeros((2, 3)), np.zeros((2, 3)), -1.0), r"guess gap must be a finite number > 0"),
+    ((np.zeros((2, 3)), np.zeros((2, 3)), 0.0), r"guess gap must be a finite number > 0"),
     ((np.zeros((2, 3)),), r"guess must be \(translation"),
 ])
 def test_a_bad_guess_names_the_field(guess, match):

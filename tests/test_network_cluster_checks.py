@@ -1,0 +1,195 @@
+"""The network solver's measures of a state (:mod:`thirdbody.network.cluster`): the scaled
+residuals and the convergence test, the merit the trust region minimises, the first phase's
+force test, the stall test and the trust region's limit on a step, each on a state made up
+here with its answer worked out by hand from the documented definitions (a force over the
+force scale, a moment over the force scale times the particle's size, the plate's force error
+over F_N). Numbers are chosen so that each term is the largest in turn and no two quantities
+the code could confuse (a size and its inverse, the force scale and F_N) are equal."""
+
+import math
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+
+from thirdbody.network import cluster
+
+SIZES = np.array([1e-3, 4e-3])                  # the particles' sizes, m
+
+
+def problem(force=None):
+    return NS(n=2, sizes=SIZES, force=force)
+
+
+def state(forces, moments, plate_normal=0.0, scale=2.0):
+    return NS(forces=np.array(forces, dtype=float), moments=np.array(moments, dtype=float),
+              plate_normal=plate_normal, scale=scale)
+
+
+@pytest.mark.parametrize(("forces", "moments", "plate", "force", "worst"), [
+    # a force: |F| / scale = 0.5 / 2
+    ([[0.0, 0.5, 0.0], [0.1, 0.0, 0.0]], [[0.0] * 3, [0.0] * 3], 0.0, None, 0.25),
+    # a negative force component counts by its size
+    ([[0.0, 0.0, -0.75], [0.1, 0.0, 0.0]], [[0.0] * 3, [0.0] * 3], 0.0, None, 0.375),
+    # the second particle's moment over its own size: 2e-3 N m / (4e-3 m 2 N)
+    ([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [[1e-4, 0.0, 0.0], [0.0, 0.0, -2e-3]], 0.0, None,
+     0.25),
+    # the first particle's: 4e-4 / (1e-3 2)
+    ([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [[0.0, -4e-4, 0.0], [0.0, 0.0, 1e-4]], 0.0, None,
+     0.2),
+    # under force control the plate's error over F_N = 3 N (not over the scale, 2 N)
+    ([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [[0.0] * 3, [0.0] * 3], 1.5, 3.0, 0.5),
+    ([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], [[0.0] * 3, [0.0] * 3], 4.5, 3.0, 0.5),
+    # a plate error below the particles' residuals
+    ([[0.9, 0.0, 0.0], [0.0, 0.1, 0.0]], [[0.0] * 3, [0.0] * 3], 2.9, 3.0, 0.45),
+])
+def test_the_convergence_test_is_the_largest_scaled_residual(forces, moments, plate, force,
+                                                             worst):
+    ev = state(forces, moments, plate)
+    done, value = cluster._converged(problem(force), ev, tol=worst)
+    assert value == pytest.approx(worst, rel=1e-14)
+    assert done                                 # at the tolerance: converged
+    done, value = cluster._converged(problem(force), ev, tol=0.99 * worst)
+    assert not done
+
+
+def test_nothing_touching_is_converged_under_gap_control_only():
+    ev = state([[0.0] * 3] * 2, [[0.0] * 3] * 2, 0.0, scale=0.0)
+    assert cluster._converged(problem(), ev, tol=0.0) == (True, 0.0)     # at any tolerance
+    done, worst = cluster._converged(problem(3.0), ev, tol=1e-6)
+    assert not done and worst == np.inf
+
+
+def test_the_merit_is_half_the_sum_of_the_squared_scaled_residuals():
+    """Scale 2 N, F_N = 3 N: forces (0.2, −0.4, 0) and (0, 0, 0.6) N, moments 1e-3 N m on the
+    1 mm particle and 4e-3 N m on the 4 mm one, the plate 0.8 N off:
+    ½ [(0.1² + 0.2²) + 0.3² + 0.5² + 0.5² + 0.4²]; the first phase's (``translate``) without the
+    moments."""
+    R = np.array([[0.2, -0.4, 0.0, 1e-3, 0.0, 0.0], [0.0, 0.0, 0.6, 0.0, -4e-3, 0.0]])
+    plate = 0.8
+    moments = 0.5**2 + 0.5**2
+    rest = 0.1**2 + 0.2**2 + 0.3**2 + 0.4**2
+    assert cluster._merit(problem(3.0), R, plate, 2.0) == pytest.approx(
+        0.5 * (rest + moments), rel=1e-14)
+    assert cluster._merit(problem(3.0), R, plate, 2.0, translate=True) == pytest.approx(
+        0.5 * rest, rel=1e-14)
+
+
+@pytest.mark.parametrize(("plate_normal", "expected"), [(3.5, 0.3), (4.0, 0.5), (2.6, 0.3)])
+def test_the_first_phase_measures_forces_and_the_plate_over_the_scale(plate_normal, expected):
+    """The first phase's test: the largest of |F| over the scale (2 N) and the plate's error
+    over the same scale, moments left out (the second particle's would be 2.5 over its size)."""
+    ev = state([[0.2, -0.6, 0.0], [0.0, 0.1, 0.0]], [[0.0] * 3, [0.02, 0.0, 0.02]],
+               plate_normal)
+    assert cluster._force_residual(problem(3.0), ev, 2.0) == pytest.approx(expected, rel=1e-14)
+    # under gap control the plate has no force to meet: the forces alone
+    assert cluster._force_residual(problem(), ev, 2.0) == pytest.approx(0.3, rel=1e-14)
+
+
+def test_an_attempt_stalls_when_its_last_passes_do_not_halve_the_best_before():
+    window = cluster._STALL
+    assert not cluster._stalled([(1.0,)] * window)        # too few passes to tell
+    before = [(6.0,), (2.0,), (4.0,)]                     # best 2: half of it is 1
+    assert cluster._stalled(before + [(1.2,)] * window)
+    assert not cluster._stalled(before + [(1.2,)] * (window - 1) + [(1.0,)])
+    assert not cluster._stalled(before + [(0.8,)] + [(1.2,)] * (window - 1))
+    # only the best before the window counts, not the first
+    assert not cluster._stalled([(2.0,), (2.0,), (6.0,)] + [(0.99,)] * window)
+
+
+def terms(d, *, bem, kn, sigma, N, plate=(0.0, 0.0)):
+    """Made-up terms whose approach changes by ``d`` under any step, and by ``plate`` times
+    the plate's move dh (a contact with the upper plate: −1)."""
+    d, plate = np.asarray(d, dtype=float), np.asarray(plate, dtype=float)
+    return NS(approach_change=lambda step, dh: (d + plate * dh, None), bem=np.asarray(bem),
+              kn=np.asarray(kn, dtype=float), sigma=np.asarray(sigma, dtype=float),
+              N=np.asarray(N, dtype=float))
+
+
+def test_the_trust_region_scales_the_whole_step_by_its_tightest_limit():
+    """At radius ρ: a rotation up to 0.05 ρ rad, a translation up to 0.05 ρ sizes, a contact's
+    normal force change up to ρ max(N, scale) (a solved contact: k_n |dδ|; an open one only
+    past its separation: k_n (dδ − σ))."""
+    rho = 0.5
+    step = np.zeros((2, 6))
+    step[0, 3:] = [0.03, 0.0, -0.04]                # |φ| = 0.05 rad: factor 0.025 / 0.05
+    step[1, :3] = [0.0, 3e-5, 4e-5]                 # 5e-5 m = 0.0125 sizes of 4 mm: none
+    dh = 2e-6
+    quiet = terms([1e-7, 0.0], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                  N=[1.0, 0.0])
+    out, out_dh, clipped = cluster._limit(problem(), quiet, np.array([True, True]), 2.0, step,
+                                          dh, rho)
+    assert clipped
+    np.testing.assert_allclose(out, 0.5 * step, rtol=1e-14)
+    assert out_dh == pytest.approx(0.5 * dh, rel=1e-14)
+    # the translation over the second particle's size: 2e-4 m = 0.05 sizes, factor 0.025/0.05
+    moved = step.copy()
+    moved[0, 3:] = 0.0
+    moved[1, :3] = [0.0, 0.0, 2e-4]
+    out, _, clipped = cluster._limit(problem(), quiet, np.array([True, True]), 2.0, moved,
+                                     dh, rho)
+    assert clipped
+    np.testing.assert_allclose(out, 0.5 * moved, rtol=1e-14)
+    # within every limit: unchanged
+    small = 0.1 * moved
+    out, out_dh, clipped = cluster._limit(problem(), quiet, np.array([True, True]), 2.0, small,
+                                          dh, rho)
+    assert not clipped and out is small and out_dh == dh
+    # a solved contact: k_n |dδ| = 4 N against ρ max(N, scale) = 0.5 * 5 N = 2.5: factor 0.625
+    loaded = terms([-4e-6, 0.0], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                   N=[5.0, 0.0])
+    out, _, clipped = cluster._limit(problem(), loaded, np.array([True, True]), 2.0, small,
+                                     dh, rho)
+    assert clipped
+    np.testing.assert_allclose(out, 0.625 * small, rtol=1e-14)
+    # ... or the scale when N is below it: 0.5 * 2 N = 1 N of 4 N: 0.25
+    light = terms([4e-6, 0.0], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                  N=[0.5, 0.0])
+    out, _, _ = cluster._limit(problem(), light, np.array([True, True]), 2.0, small, dh, rho)
+    np.testing.assert_allclose(out, 0.25 * small, rtol=1e-14)
+    # an inactive contact does not limit
+    out, _, clipped = cluster._limit(problem(), light, np.array([False, True]), 2.0, small,
+                                     dh, rho)
+    assert not clipped
+    # an open contact: only the closing beyond its separation, k_n (3e-6 − 1e-6) = 2 N: 0.5
+    closing = terms([0.0, 3e-6], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                    N=[0.0, 0.0])
+    out, _, _ = cluster._limit(problem(), closing, np.array([True, True]), 2.0, small, dh, rho)
+    np.testing.assert_allclose(out, 0.5 * small, rtol=1e-14)
+    opening = terms([0.0, -3e-6], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                    N=[0.0, 0.0])
+    assert not cluster._limit(problem(), opening, np.array([True, True]), 2.0, small, dh,
+                              rho)[2]
+    # the plate's move counts: coming down 4 µm onto a solved upper contact, k_n 4 µm = 4 N
+    # against ρ max(N, scale) = 1 N: 0.25 of the step and of dh
+    upper = terms([0.0, 0.0], bem=[True, False], kn=[1e6, 1e6], sigma=[0.0, 1e-6],
+                  N=[0.5, 0.0], plate=[-1.0, 0.0])
+    out, out_dh, clipped = cluster._limit(problem(), upper, np.array([True, True]), 2.0, small,
+                                          -4e-6, rho)
+    assert clipped and out_dh == pytest.approx(-1e-6, rel=1e-14)
+    np.testing.assert_allclose(out, 0.25 * small, rtol=1e-14)
+
+
+def test_the_first_gap_under_force_control_is_hertz_at_both_plates():
+    """One sphere (R = 1 mm, E* = E/(1 − ν²)) whose top is below the plate: F_N through two
+    Hertz contacts with rigid plates in series, F = (4/3) E* √R δ^(3/2) at each, so the first
+    gap is the top less 2δ. Two equal spheres of the same top share F_N: δ at F_N/2. A plate
+    already pressing on the top is kept."""
+    import thirdbody as tb
+    from thirdbody.network import Body
+    from thirdbody.shapes import Sphere
+
+    R, F = 1e-3, 2.5
+    mat = tb.Material(2e9, 0.25)
+    e_star = 2e9 / (1 - 0.25**2)
+
+    def delta(force):
+        return (force / (4 / 3 * e_star * math.sqrt(R))) ** (2 / 3)
+
+    one = NS(start=[Body(Sphere(R), mat, centre=(0.0, 0.0, 1.5 * R))], force=F)
+    top = 2.5 * R
+    assert cluster._first_gap(one, 3 * R) == pytest.approx(top - 2 * delta(F), rel=1e-9)
+    assert cluster._first_gap(one, 2.4 * R) == 2.4 * R
+    two = NS(start=[Body(Sphere(R), mat, centre=(x, 0.0, 1.5 * R)) for x in (0.0, 3 * R)],
+             force=F)
+    assert cluster._first_gap(two, 3 * R) == pytest.approx(top - 2 * delta(F / 2), rel=1e-9)
