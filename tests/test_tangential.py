@@ -189,12 +189,16 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
     n_warm = len(solves) - n_cold
     assert cold.stick.sum() == 0 and warm.stick.sum() == 0
     assert 0 < n_warm <= 5 < n_cold
-    check_coulomb(warm)
-    force = warm.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
-    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
-    np.testing.assert_allclose(warm.shift, cold.shift, rtol=1e-6)
-    np.testing.assert_allclose(warm.traction, cold.traction, rtol=0,
-                               atol=1e-6 * MU * normal.pressure.max())
+
+    def agrees_with_the_cold_solve(result):
+        check_coulomb(result)
+        force = result.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
+        assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
+        np.testing.assert_allclose(result.shift, cold.shift, rtol=1e-6)
+        np.testing.assert_allclose(result.traction, cold.traction, rtol=0,
+                                   atol=1e-6 * MU * normal.pressure.max())
+
+    agrees_with_the_cold_solve(warm)
     # with the last step's search Jacobian (the ellipse is turned: its shift's angle was
     # corrected by Broyden's method at both angles)
     assert first.search_jacobian is not None
@@ -203,12 +207,7 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
                                    shift_jacobian=first.search_jacobian)
     n_newton = len(solves) - before
     assert 0 < n_newton < n_warm
-    check_coulomb(newton)
-    force = newton.traction.reshape(2, -1).sum(axis=1) * grid.cell_area
-    assert np.abs(force - Q).max() <= 1e-8 * np.hypot(*Q)
-    np.testing.assert_allclose(newton.shift, cold.shift, rtol=1e-6)
-    np.testing.assert_allclose(newton.traction, cold.traction, rtol=0,
-                               atol=1e-6 * MU * normal.pressure.max())
+    agrees_with_the_cold_solve(newton)
     assert newton.search_jacobian is not None
 
 
