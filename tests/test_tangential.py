@@ -160,6 +160,20 @@ def test_the_shift_search_turns_the_shift_to_meet_an_oblique_force(monkeypatch, 
     assert abs(e[0] * along[1] - e[1] * along[0]) > 1e-3      # sine of the angle between them
 
 
+def _sliding_step_and_the_next(angle: float):
+    """The turned ellipse sliding (Q at 0.9999 μW along ``angle`` degrees), and the next step's
+    normal solve (the load up by 0.05 %) with its force Q: (first, normal, Q)."""
+    e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
+    first = solve_tangential(_turned_ellipse(), MU, force=0.9999 * MU * W_ELLIPSE * e)
+    grid = first.normal.grid
+    X, Y = grid.mesh()
+    u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
+    v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
+    normal = tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, first.normal.pair,
+                             force=1.0005 * W_ELLIPSE)
+    return first, normal, 0.9999 * MU * normal.force * e
+
+
 @pytest.mark.parametrize("angle", [0, 20])
 def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypatch, angle):
     """A step repeated under a slightly different pressure (the turned ellipse at 1.0005 times
@@ -172,15 +186,8 @@ def test_the_shift_search_from_a_nearby_steps_shift_takes_fewer_solves(monkeypat
     step the search from scratch returns, to the solvers' tolerance."""
     from thirdbody.bem.tangential import restart_traction, solve_tangential_from
 
-    e = np.array([np.cos(np.radians(angle)), np.sin(np.radians(angle))])
-    first = solve_tangential(_turned_ellipse(), MU, force=0.9999 * MU * W_ELLIPSE * e)
+    first, normal, Q = _sliding_step_and_the_next(angle)
     grid = first.normal.grid
-    X, Y = grid.mesh()
-    u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
-    v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
-    normal = tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, first.normal.pair,
-                             force=1.0005 * W_ELLIPSE)
-    Q = 0.9999 * MU * normal.force * e
     solves = _count_shift_solves(monkeypatch)
     cold = solve_tangential(normal, MU, force=Q)
     n_cold = len(solves)
@@ -221,16 +228,9 @@ def test_a_repeated_step_without_stick_cells_goes_straight_to_the_shift_search(m
     import thirdbody.bem.tangential as tangential
     from thirdbody.bem.tangential import restart_traction, solve_tangential_from
 
-    e = np.array([np.cos(np.radians(20)), np.sin(np.radians(20))])
-    first = solve_tangential(_turned_ellipse(), MU, force=0.9999 * MU * W_ELLIPSE * e)
+    first, normal, Q = _sliding_step_and_the_next(20)
     assert first.stick.sum() == 0
     grid = first.normal.grid
-    X, Y = grid.mesh()
-    u = X * np.cos(np.pi / 6) + Y * np.sin(np.pi / 6)
-    v = -X * np.sin(np.pi / 6) + Y * np.cos(np.pi / 6)
-    normal = tb.solve_normal(u**2 / (2 * 0.6) + v**2 / (2 * 0.15), grid, first.normal.pair,
-                             force=1.0005 * W_ELLIPSE)
-    Q = 0.9999 * MU * normal.force * e
     start = restart_traction(first.traction, first.slip, normal, MU)
     calls = []
     by_active_set = tangential._by_active_set
