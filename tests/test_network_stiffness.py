@@ -81,6 +81,18 @@ def random_contacts(rng, count: int) -> list[ContactModel]:
     return models
 
 
+def _central_differences(function) -> np.ndarray:
+    """Central differences of ``function`` (12 motions of two bodies: translations of a in m,
+    rotations of a in rad, then of b) column by column: steps of 1 nm and 1 µrad."""
+    steps = np.array([1e-9] * 3 + [1e-6] * 3 + [1e-9] * 3 + [1e-6] * 3)
+    columns = []
+    for j in range(12):
+        e = np.zeros(12)
+        e[j] = steps[j]
+        columns.append((np.asarray(function(e)) - np.asarray(function(-e))) / (2 * steps[j]))
+    return np.stack(columns, axis=-1)
+
+
 @pytest.mark.parametrize("both_ways", [True, False])
 def test_the_stacked_laws_are_the_per_contact_laws_in_every_state(monkeypatch, both_ways):
     monkeypatch.setattr(stiffness, "_TANGENT_BOTH_WAYS", both_ways)
@@ -183,15 +195,8 @@ def test_the_stacked_base_blocks_of_two_spheres_are_the_derivatives_of_their_wre
                 np.concatenate([-f, -np.cross(xp - cb, f) - m]),
                 Ra + Rb - np.linalg.norm(d))
 
-    steps = np.array([1e-9] * 3 + [1e-6] * 3 + [1e-9] * 3 + [1e-6] * 3)
-    fd_a, fd_b, fd_delta = np.zeros((6, 12)), np.zeros((6, 12)), np.zeros(12)
-    for j in range(12):
-        e = np.zeros(12)
-        e[j] = steps[j]
-        plus, minus = wrenches(e), wrenches(-e)
-        fd_a[:, j] = (plus[0] - minus[0]) / (2 * steps[j])
-        fd_b[:, j] = (plus[1] - minus[1]) / (2 * steps[j])
-        fd_delta[j] = (plus[2] - minus[2]) / (2 * steps[j])
+    fd = _central_differences(lambda e: np.concatenate([*wrenches(e)[:2], [wrenches(e)[2]]]))
+    fd_a, fd_b, fd_delta = fd[:6], fd[6:12], fd[12]
     # absolute tolerances by quadrant: force or moment rows, translation or rotation columns
     rotation = np.repeat([False, True, False, True], 3)
     atol = 1e-6 * np.where(rotation[None, :], np.array([[N0]] * 3 + [[N0 * Ra]] * 3),
@@ -353,12 +358,7 @@ def test_the_base_blocks_carry_a_tangential_force_and_a_twist_along_as_the_spher
         return np.concatenate([np.concatenate([f, np.cross(xp - ca, f) + m]),
                                np.concatenate([-f, -np.cross(xp - cb, f) - m])])
 
-    steps = np.array([1e-9] * 3 + [1e-6] * 3 + [1e-9] * 3 + [1e-6] * 3)
-    fd = np.zeros((12, 12))
-    for j in range(12):
-        e = np.zeros(12)
-        e[j] = steps[j]
-        fd[:, j] = (wrenches(e) - wrenches(-e)) / (2 * steps[j])
+    fd = _central_differences(wrenches)
     block = np.vstack([stack.base_a[0], stack.base_b[0]])
     # the model's levers run to the pressure centroid, δ₀/2 inside a's surface: an error of
     # O(δ₀/R) = 1e-5 of each quadrant's scale (N₀/R_a for a force per translation, N₀ R_a for
@@ -421,12 +421,7 @@ def test_the_shift_increments_rows_are_the_derivatives_of_the_evaluated_incremen
             motion.append(c - start + np.cross(dphi, 0.5 * (lever0 + xp - c)))
         return fraction * P0 @ (motion[1] - motion[0])
 
-    steps = np.array([1e-9] * 3 + [1e-6] * 3 + [1e-9] * 3 + [1e-6] * 3)
-    fd = np.zeros((3, 12))
-    for j in range(12):
-        e = np.zeros(12)
-        e[j] = steps[j]
-        fd[:, j] = (shift(e) - shift(-e)) / (2 * steps[j])
+    fd = _central_differences(shift)
     rows = stack.tangential_rows[0]
     # columns: translations (m/m), rotations (m/rad, scale the lever 1 mm); the composition of
     # the rotations differs from their sum (the model's) by O(|Δφ|) = 3e-4 relative (measured
