@@ -193,3 +193,108 @@ def test_the_first_gap_under_force_control_is_hertz_at_both_plates():
     two = NS(start=[Body(Sphere(R), mat, centre=(x, 0.0, 1.5 * R)) for x in (0.0, 3 * R)],
              force=F)
     assert cluster._first_gap(two, 3 * R) == pytest.approx(top - 2 * delta(F / 2), rel=1e-9)
+
+
+def test_the_reach_of_a_step_is_its_furthest_move_in_trust_radii():
+    """At radius 1 a particle may turn by 0.05 rad and move by 0.05 of its size: a turn of
+    0.02 rad is 0.4, a move of 4e-4 m of the 4 mm particle 2.0, of the 1 mm one 8."""
+    step = np.zeros((2, 6))
+    step[0, 3:] = [0.0, 0.012, 0.016]                # |φ| = 0.02 rad
+    step[1, :3] = [0.0, 4e-4, 0.0]
+    assert cluster._reach(step, SIZES) == pytest.approx(2.0, rel=1e-14)
+    assert cluster._reach(step[:1], SIZES[:1]) == pytest.approx(0.4, rel=1e-14)
+    assert cluster._reach(step[::-1], SIZES) == pytest.approx(8.0, rel=1e-14)
+    assert cluster._reach(np.zeros((0, 6)), SIZES[:0]) == 0.0
+
+
+def soft_pair(seed=11):
+    """A two-particle Newton matrix (scaled units) whose second particle has a soft turning
+    mode (a singular value of 1e-4 of the stiffest), and a right-hand side."""
+    rng = np.random.default_rng(seed)
+    U = np.linalg.qr(rng.normal(size=(12, 12)))[0]
+    s = np.linspace(2.0, 1.0, 12)
+    J = U @ np.diag(s) @ U.T
+    soft = np.zeros(12)
+    soft[9] = 1.0                                     # the second particle's φ_x
+    J = J - (J @ soft)[:, None] * soft[None, :] - soft[:, None] * (soft @ J)[None, :] \
+        + (soft @ J @ soft) * np.outer(soft, soft)    # decoupled ...
+    J += (1e-4 - J[9, 9]) * np.outer(soft, soft)      # ... and soft
+    b = rng.normal(size=12) * 1e-6                    # N (forces, moments over sizes)
+    col_scale = np.hstack([np.ones((2, 3)), np.repeat(1.0 / SIZES[:, None], 3, 1)])
+    return J, b, col_scale
+
+
+def test_the_damped_step_solves_the_shifted_normal_equations_at_the_trust_radius():
+    """The Levenberg-Marquardt step x̂ of a group whose Newton step reaches past the radius
+    solves (JᵀJ + λI) x̂ = Jᵀb for some λ > 0 (λ recovered here from x̂ itself) and reaches the
+    radius; the stiff particle keeps nearly its Newton step, where the common factor would
+    scale it by the soft particle's reach. Within the radius it is the Newton step."""
+    J, b, col_scale = soft_pair()
+    newton = np.linalg.solve(J, b)
+    newton_step = newton.reshape(2, 6) * col_scale
+    reach = cluster._reach(newton_step, SIZES)
+    radius = 1e-3 * reach
+    assert reach > 100 * radius                       # the soft particle's turn is huge
+    x = cluster._damped(J, b, np.arange(12), col_scale, SIZES, radius)
+    assert x.shape == (2, 6)
+    assert cluster._reach(x, SIZES) == pytest.approx(radius, rel=1e-6)
+    xs = (x / col_scale).ravel()                      # back to scaled unknowns
+    g = J.T @ b - J.T @ J @ xs
+    lam = float(g @ xs) / float(xs @ xs)
+    assert lam > 0
+    np.testing.assert_allclose(J.T @ J @ xs + lam * xs, J.T @ b, rtol=0,
+                               atol=1e-9 * np.abs(J.T @ b).max())
+    # the stiff particle: within a few per cent of its Newton step (the common factor would
+    # have left it 1e-3 of it)
+    np.testing.assert_allclose(x[0], newton_step[0], rtol=0,
+                               atol=0.05 * np.abs(newton_step[0]).max())
+    # a radius the Newton step is within: the Newton step itself
+    wide = cluster._damped(J, b, np.arange(12), col_scale, SIZES, 2.0 * reach)
+    np.testing.assert_allclose(wide, newton_step, rtol=1e-10, atol=0)
+    # the rotation-free phase: only the translations are unknowns (keep), rotations stay 0
+    keep = np.array([0, 1, 2, 6, 7, 8])
+    part = cluster._damped(J[np.ix_(keep, keep)], b[keep], keep, col_scale, SIZES, radius)
+    assert not part[:, 3:].any()
+    np.testing.assert_allclose(part[:, :3].ravel(),
+                               np.linalg.solve(J[np.ix_(keep, keep)], b[keep]), rtol=1e-10)
+
+
+def model_of(blocks, n):
+    """A linear model (:class:`cluster._Model`) of 6 x 6 blocks {(row, col): block}, no plate."""
+    keys = list(blocks)
+    return cluster._Model(rows=np.array([k[0] for k in keys]), cols=np.array([k[1] for k in keys]),
+                          blocks=np.array([blocks[k] for k in keys]), constant=np.zeros((n, 6)),
+                          h_col=np.zeros((n, 6)), h_row=np.zeros((n, 6)), h_diag=0.0,
+                          plate_constant=0.0)
+
+
+def test_only_groups_of_touching_particles_take_the_damped_step():
+    """Particles 0 and 1 linked by a contact (an off-diagonal block) and a lone particle 2, each
+    with a soft turning mode whose Newton step reaches far past the radius: the pair takes the
+    damped step of the radius (and is reported), the lone particle keeps its Newton step (the
+    trust region's common factor limits it later); without a radius nothing is damped."""
+    J, b, col_scale = soft_pair()
+    sizes = np.array([1e-3, 4e-3, 1e-3])
+    scale = np.hstack([np.ones((3, 3)), np.repeat(1.0 / sizes[:, None], 3, 1)])
+    # unscale the scaled matrix: blocks in N per m (forces) and N m per rad (moments)
+    physical = J / np.outer(np.hstack([scale[0], scale[1]]), np.hstack([scale[0], scale[1]]))
+    lone = physical[6:, 6:] * np.outer(scale[1], scale[1]) / np.outer(scale[2], scale[2])
+    blocks = {(0, 0): physical[:6, :6], (0, 1): physical[:6, 6:], (1, 0): physical[6:, :6],
+              (1, 1): physical[6:, 6:], (2, 2): lone}
+    R = -np.vstack([b.reshape(2, 6), b[6:]]) / scale
+    problem = NS(n=3, sizes=sizes, force=None)
+    free, _ = cluster._solve_model(problem, model_of(blocks, 3), R, 0.0)
+    reach = cluster._reach(free[:2], sizes[:2])
+    radius = 1e-3 * reach
+    assert cluster._reach(free[2:], sizes[2:]) > 100 * radius
+    damped = []
+    step, dh = cluster._solve_model(problem, model_of(blocks, 3), R, 0.0, radius=radius,
+                                    damped=damped)
+    assert dh == 0.0 and damped == [[0, 1]]
+    assert cluster._reach(step[:2], sizes[:2]) == pytest.approx(radius, rel=1e-6)
+    np.testing.assert_allclose(step[:2], cluster._damped(J, b, np.arange(12), col_scale,
+                                                         sizes[:2], radius), rtol=1e-9)
+    np.testing.assert_array_equal(step[2], free[2])
+    # the model's own solve: the Newton step of each group (the pair's from numpy)
+    np.testing.assert_allclose(free[:2], np.linalg.solve(J, b).reshape(2, 6) * col_scale,
+                               rtol=1e-9)
