@@ -298,3 +298,67 @@ def test_only_groups_of_touching_particles_take_the_damped_step():
     # the model's own solve: the Newton step of each group (the pair's from numpy)
     np.testing.assert_allclose(free[:2], np.linalg.solve(J, b).reshape(2, 6) * col_scale,
                                rtol=1e-9)
+
+
+def no_descent(monkeypatch, entered_branches: bool):
+    """A one-particle model whose merit rises along every nonzero step (a kink at the start):
+    ``_piecewise`` and the solves are stand-ins that record what the active-set passes ask.
+    With ``entered_branches`` any nonzero step changes the state of the particle's only
+    contact from that of the last solve's model (open after the first solve, closed after the
+    second, ...): branches other than those the step was solved on."""
+    calls = []
+    trial = np.full((1, 6), 1e-6)
+    laws = NS(slide=np.array([False]), g=np.zeros((1, 3)))
+
+    def piecewise(problem, terms, R, plate, step, dh):
+        moved = bool(step.any())
+        out = R * (1.0 + 1e6 * float(np.abs(step).sum()))
+        closed = not (moved and entered_branches and len(calls) % 2 == 1)
+        active = np.array([closed])
+        return out, 0.0, ("model at", moved, closed), active, laws
+
+    def solve_model(problem, model, R, plate, translate=False, radius=None, damped=None):
+        calls.append(model)
+        return trial * len(calls), 0.0
+
+    monkeypatch.setattr(cluster, "_piecewise", piecewise)
+    monkeypatch.setattr(cluster, "_solve_model", solve_model)
+    monkeypatch.setattr(cluster, "_model", lambda *args: "start model")
+    monkeypatch.setattr(cluster, "_STICK_FIRST", False)
+    problem = NS(n=1, sizes=SIZES[:1], force=None, correction=None)
+    terms = NS(bem=np.array([True]), sigma=np.array([0.0]), reach=np.array([1.0]),
+               a=np.array([0]), b=np.array([-1]), pair=np.array([False]),
+               upper=np.array([False]), models=NS(sliding=np.array([False])))
+    R = np.array([[0.1, 0.0, 0.0, 0.0, 0.0, 0.0]])
+    step, dh, model, _ = cluster._newton_step(problem, terms, R, 0.0, 1.0)
+    assert dh == 0.0                                  # gap control: the plate stays
+    return calls, trial, step, model
+
+
+@pytest.mark.parametrize("switch", [True, False])
+def test_a_step_the_model_sees_no_descent_along_is_left_to_the_bem(monkeypatch, switch):
+    """No fraction of the Newton step lowers the model's merit: with the switch the passes
+    return that step (the BEM and the trust region judge it), without it a zero step (the
+    attempt then ends: "no way down")."""
+    monkeypatch.setattr(cluster, "_NO_DESCENT_TRIAL", switch)
+    monkeypatch.setattr(cluster, "_ENTERED_BRANCHES", 0)
+    calls, trial, step, model = no_descent(monkeypatch, entered_branches=False)
+    assert calls == ["start model"]                   # one solve: nothing else to try
+    if switch:
+        np.testing.assert_array_equal(step, trial)
+        assert model == ("model at", True, True)      # the model at the returned step
+    else:
+        assert not step.any()
+
+
+@pytest.mark.parametrize("entered", [0, 1, 2])
+def test_branches_entered_at_the_start_get_their_own_newton_step(monkeypatch, entered):
+    """A step whose every fraction changes a contact's state from the one it was solved on:
+    the passes solve the model on the entered branches again, at most ``_ENTERED_BRANCHES``
+    times, while the step is still zero."""
+    monkeypatch.setattr(cluster, "_NO_DESCENT_TRIAL", False)
+    monkeypatch.setattr(cluster, "_ENTERED_BRANCHES", entered)
+    calls, _, step, _ = no_descent(monkeypatch, entered_branches=True)
+    # each re-solve on the branches the smallest fraction entered: open, closed, open, ...
+    assert calls == ["start model"] + [("model at", True, k % 2 == 1) for k in range(entered)]
+    assert not step.any()

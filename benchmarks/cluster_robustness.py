@@ -1,0 +1,101 @@
+"""How often the cluster solver finds the first compression step of a touching lattice, over
+random radii: the failure rate on a hard, degenerate case (issue 25).
+
+Each case is ``benchmarks/cluster_lattice.py``'s lattice at ``--gap 0`` (n × n spheres of
+R = 1 mm times 1 + 5e-4 N(0, 1), touching their neighbours, in a periodic box) with one seed of
+the radii, loaded by the first of 20 force steps (0.025 N a sphere, μ = 0.3 everywhere, 20 cells
+per size, tol 1e-5). The spheres differ by about 0.5 µm: the upper plate meets the tallest
+first, most pair contacts are open or closed by fractions of a micrometre, and the lightest
+loaded spheres touch the plates over less than a cell, which makes the step a hard test of the
+iteration's globalisation (kinks of the contact laws at the start, nearly free particles).
+
+For every case the script runs each ``--variants`` setting of the solver's switches in the
+same process, one after the other, and prints whether it converged, its passes and its CPU
+seconds; at the end the converged share and the total CPU time of each variant. Run:
+
+    .venv/bin/python benchmarks/cluster_robustness.py --sizes 4 5 --seeds 1-16 \\
+        --variants main new
+
+Variants: ``main`` is the solver before the switches below existed; ``new`` has all of them
+(the default settings); ``lm``, ``entered`` and ``trial`` add one each to ``main``:
+``_LEVENBERG_MARQUARDT`` (the damped step of groups), ``_ENTERED_BRANCHES`` (the re-solve on
+the branches a step enters) and ``_NO_DESCENT_TRIAL`` (the BEM tries the Newton step that the
+model sees no descent along).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from cluster_lattice import lattice
+from thirdbody.network import cluster
+from thirdbody.network.cluster import ClusterConvergenceError, ClusterNumerics, solve_cluster
+
+VARIANTS = {
+    "main": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": False},
+    "default": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 2,
+                "_NO_DESCENT_TRIAL": True},
+    "lm": {"_LEVENBERG_MARQUARDT": True, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": False},
+    "entered": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 2,
+                "_NO_DESCENT_TRIAL": False},
+    "trial": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": True},
+    "all": {"_LEVENBERG_MARQUARDT": True, "_ENTERED_BRANCHES": 2, "_NO_DESCENT_TRIAL": True},
+}
+
+
+def seeds(text: str) -> list[int]:
+    """'1-16' or '3' or '1,4,9'."""
+    out: list[int] = []
+    for part in text.split(","):
+        first, _, last = part.partition("-")
+        out.extend(range(int(first), int(last or first) + 1))
+    return out
+
+
+def first_step(n: int, seed: int) -> tuple[bool, int, float]:
+    """(converged, passes, CPU seconds) of the first compression step of one lattice."""
+    bodies, side = lattice(n, 5e-4, 0.0, seed)
+    cpu = time.process_time()
+    try:
+        result = solve_cluster(bodies, {}, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
+                               force=0.5 * n * n / 20, box=(side, side),
+                               numerics=ClusterNumerics(resolution=20.0, tol=1e-5))
+    except ClusterConvergenceError:
+        return False, 0, time.process_time() - cpu
+    return True, result.iterations, time.process_time() - cpu
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", type=int, nargs="+", default=[4, 5])
+    parser.add_argument("--seeds", type=seeds, default=seeds("1-8"))
+    parser.add_argument("--variants", nargs="+", choices=sorted(VARIANTS),
+                        default=["main", "default"])
+    args = parser.parse_args(argv)
+    saved = {name: getattr(cluster, name) for name in VARIANTS["main"]}
+    totals = {v: [0, 0, 0.0] for v in args.variants}      # converged, cases, CPU s
+    try:
+        for n in args.sizes:
+            for seed in args.seeds:
+                line = [f"{n}x{n} seed {seed:3d}:"]
+                for variant in args.variants:
+                    for name, value in VARIANTS[variant].items():
+                        setattr(cluster, name, value)
+                    ok, passes, cpu = first_step(n, seed)
+                    total = totals[variant]
+                    total[0] += ok
+                    total[1] += 1
+                    total[2] += cpu
+                    line.append(f"{variant} {f'{passes:3d} passes' if ok else 'FAILED    '} "
+                                f"{cpu:6.1f} s")
+                print("  ".join(line), flush=True)
+    finally:
+        for name, value in saved.items():
+            setattr(cluster, name, value)
+    for variant, (ok, cases, cpu) in totals.items():
+        print(f"{variant}: {ok} of {cases} converged, CPU {cpu:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
