@@ -252,6 +252,11 @@ def test_a_solved_contacts_model_holds_the_textbook_stiffnesses():
     T = common["tangential_force"]
     np.testing.assert_allclose(still.slip_direction, T / np.linalg.norm(T), rtol=1e-14)
     assert still.k_across == pytest.approx(k0, rel=1e-14)
+    # ... but a tangential slip of 3e-9 of a normal one is a slip: its direction
+    t = P @ np.array([0.0, 1.0, -1.0])
+    t /= np.linalg.norm(t)
+    small = ContactModel.of(slip=3e-7 * n + 1e-15 * t, sliding=True, **common)
+    np.testing.assert_allclose(small.slip_direction, t, rtol=0, atol=1e-6)
     # sliding in pure torsion (every cell slips round the centre): no mean slip and no net
     # force, so no direction is preferred; the model slides along some unit tangent, k0 across
     spin = ContactModel.of(**{**common, "tangential_force": np.zeros(3)}, slip=3e-7 * n,

@@ -63,6 +63,8 @@ __all__ = ["ContactModel", "ModelStack", "TangentialLaws", "skew"]
 #: motion back from the current iterate, the former choice)
 _TANGENT_BOTH_WAYS = True
 
+#: a slip's tangential part below this share of the whole slip is taken as none (rounding)
+_SLIP_ROUNDING = 1e-12
 _I = np.eye(3)
 _O = np.zeros((3, 3))
 
@@ -197,8 +199,13 @@ class ContactModel:
         if mu <= 0 or N <= 0:
             k0 = 0.0
         elif sliding:
-            s = np.asarray(slip, dtype=float) @ P
+            raw = np.asarray(slip, dtype=float)
+            s = raw @ P
             length = float(np.linalg.norm(s))
+            if length <= _SLIP_ROUNDING * float(np.linalg.norm(raw)):
+                # a slip along the normal: what its projection leaves is rounding (2e-23 m of
+                # a 3e-7 m slip with numpy 2.4), not a direction
+                s, length = np.zeros(3), 0.0
             if length > 0:
                 direction = s / length
             elif np.linalg.norm(T) > 0:
