@@ -362,3 +362,26 @@ def test_branches_entered_at_the_start_get_their_own_newton_step(monkeypatch, en
     # each re-solve on the branches the smallest fraction entered: open, closed, open, ...
     assert calls == ["start model"] + [("model at", True, k % 2 == 1) for k in range(entered)]
     assert not step.any()
+
+
+def test_the_damped_step_leaves_modes_without_stiffness_alone():
+    """Edge cases of the damped step: a mode below 1e-7 of the stiffest takes no step (as in
+    the undamped solve), a matrix of zeros gives no step, and a radius below what even the
+    largest shift reaches gives that shift's step: next to nothing, along Jᵀb (steepest
+    descent)."""
+    J, b, col_scale = soft_pair()
+    U, s, Vt = np.linalg.svd(J)
+    s[-1] = 0.4 * cluster._RCOND * s[0]               # below the cut: no step along it
+    weak = U @ np.diag(s) @ Vt
+    expected = Vt[:-1].T @ ((U[:, :-1].T @ b) / s[:-1])
+    wide = cluster._damped(weak, b, np.arange(12), col_scale, SIZES, 1e30)
+    np.testing.assert_allclose((wide / col_scale).ravel(), expected, rtol=1e-9,
+                               atol=1e-12 * np.abs(expected).max())
+    assert not cluster._damped(np.zeros((12, 12)), b, np.arange(12), col_scale, SIZES,
+                               1e-3).any()
+    tiny = cluster._damped(J, b, np.arange(12), col_scale, SIZES, 1e-300)
+    scaled = (tiny / col_scale).ravel()
+    gradient = J.T @ b
+    assert 0 < np.linalg.norm(scaled) < 1e-6 * np.linalg.norm(np.linalg.solve(J, b))
+    assert scaled @ gradient == pytest.approx(np.linalg.norm(scaled) * np.linalg.norm(gradient),
+                                              rel=1e-6)
