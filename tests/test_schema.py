@@ -168,8 +168,11 @@ def test_files_of_the_earlier_format_open_in_todays_form(name):
 @pytest.mark.slow
 def test_an_earlier_file_reads_as_the_same_run_today(tmp_path):
     """``tests/data/format1_particle.nc`` was written by the format-1 code (a coarse Fig. 3
-    potato, 4 steps); the same configuration run today gives every variable bit for bit (the
-    wall times aside)."""
+    potato, 4 steps); the same configuration run today gives every variable to rounding (the
+    wall times aside): within 1e-12 of the variable's largest value, or 1e-15 of its unit for
+    one that is rounding itself (a residual, a yaw of 1e-16 degrees). It was bit for bit until
+    numpy 2.4 changed the last bits (the plate gap by 2e-19 m, the pressure by 1e-13 of its
+    peak); integer variables still are."""
     particle = tb.Particle(Potato((1.0e-3, 0.8e-3, 0.7e-3), seed=4, amplitude=0.1,
                                   wavenumber_range=(4, 8)), tb.Material(1e9, 0.3), 20.0)
     ds = tb.Simulation(particle, tb.Plates(0.46), tb.LinearRamp(stop=6.0, steps=4),
@@ -178,8 +181,13 @@ def test_an_earlier_file_reads_as_the_same_run_today(tmp_path):
     for name in ds.data_vars:
         if name.startswith("time_"):
             continue
-        assert np.array_equal(old[name].values, ds[name].values,
-                              equal_nan=old[name].dtype.kind == "f"), name
+        before, now = old[name].values, ds[name].values
+        if before.dtype.kind == "f":
+            scale = float(np.nanmax(np.abs(before), initial=0.0))
+            assert np.allclose(now, before, rtol=0, atol=1e-12 * scale + 1e-15,
+                               equal_nan=True), name
+        else:
+            assert np.array_equal(before, now), name
     for name in ("map_x", "map_y", "map_i", "map_j", "map_step"):
         assert np.array_equal(old[name].values, ds[name].values), name
 

@@ -102,3 +102,18 @@ def test_the_summary_names_its_steady_mu_eff_with_units():
         assert schema.VARIABLES[name].kind == "summary" and schema.VARIABLES[name].units == "1"
     assert schema.VARIABLES["final_sliding_distance"].units == "m"
     assert schema.parameter_units("network.mu_pp") == "1"
+
+
+@pytest.mark.parametrize("state", ["stick", "roll_upper", "roll_lower", "rotate", "roll"])
+def test_the_behaviour_is_the_state_of_the_first_turn_whatever_it_was(state):
+    """Every state a particle can be in when it turns (:func:`thirdbody.network.run.particle_state`
+    with ``turned``; the layer's states are the first four) is a behaviour of its own: a network
+    run's particle that turned while touching particles ("roll") was summarised as "failed"
+    although its case completed."""
+    from thirdbody.schema import BEHAVIOURS, STATES
+    from thirdbody.sweep import _case_summary
+
+    q = [Rotation.from_euler("y", 20, degrees=True).as_quat()] * 3
+    case = _case(q, [0, 1, 1], [[1.0, 0.0]] * 3, [0.2, 0.3, 0.4])
+    case.arrays["state"][1:, 0] = STATES.index(state)
+    assert BEHAVIOURS[_case_summary(case)["behaviour"]] == state

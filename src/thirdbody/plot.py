@@ -370,7 +370,8 @@ def _save_figures(plt, figures: dict, out: str | Path, formats: tuple[str, ...])
 
 # --- sweeps ------------------------------------------------------------------------------------
 _BEHAVIOUR_COLOURS = {"stick": "#4c72b0", "roll_upper": "#dd8452", "roll_lower": "#c44e52",
-                      "rotate": "#55a868", "failed": "0.35", "error": "black", "missing": "white"}
+                      "rotate": "#55a868", "failed": "0.35", "error": "black", "missing": "white",
+                      "roll": "#937860"}
 
 
 #: the quantity a configuration key sets, as an axis label (mathtext); its units come from

@@ -41,8 +41,11 @@ STATES = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "unloaded", "
 SLIDING = ("slide", "slide_upper", "slide_lower")
 #: what the event table records (``event_kind``)
 EVENTS = ("loaded", "unloaded", "roll_upper", "roll_lower", "rotate", "rolled_off")
-#: a sweep case's behaviour over its run (``behaviour``), in code order
-BEHAVIOURS = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "error", "missing")
+#: a sweep case's behaviour over its run (``behaviour``), in code order (new codes go at the
+#: end: "roll", a network run's particle that turned with contacts sticking and sliding while
+#: touching other particles, was coded "failed" before it was added)
+BEHAVIOURS = ("stick", "roll_upper", "roll_lower", "rotate", "failed", "error", "missing",
+              "roll")
 INTERFACES = ("upper", "lower")
 COMPONENTS = ("x", "y")
 XYZ = ("x", "y", "z")
