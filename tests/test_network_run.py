@@ -607,8 +607,10 @@ def test_a_file_written_before_network_runs_reads_with_their_variables(tmp_path)
     ("roll", False, {"upper": "slide", "lower": "stick"}, False, "slide_upper"),
     ("slide", True, {"upper": "slide", "lower": "slide"}, False, "rotate"),
     ("slide", False, {"upper": "slide", "lower": "slide"}, False, "slide"),
-    # no contact slides: it sticks, turned or not (rolling without slip)
+    # no contact slides: it sticks, turned or not (under compression; it rolls without slip
+    # when the plate slid: below)
     ("roll", True, {"upper": "stick", "lower": "stick"}, False, "stick"),
+    ("roll", True, {"upper": "stick", "lower": "stick"}, True, "stick"),
     ("stick", False, {"upper": "stick", "lower": "stick"}, False, "stick"),
     ("free", False, {}, False, "unloaded"),
     # touching particles: roll only when it turns
@@ -628,6 +630,10 @@ def test_a_particle_rolls_only_when_it_turns(kinematics, turned, plates, touches
     state = particle_state(kinematics, turned, contacts, plates, touches)
     assert state == expected
     assert state in tb.schema.STATES
+    # the plate sliding changes only a turn with every contact sticking: rolling without slip
+    slid = particle_state(kinematics, turned, contacts, plates, touches, slid=True)
+    rolled = expected == "stick" and turned
+    assert slid == ("roll" if rolled else expected)
 
 
 # --- the secant predictor between steps --------------------------------------------------------

@@ -278,7 +278,8 @@ def test_a_sphere_between_sliding_plates_rolls_without_resistance(sphere_run):
     by Δs/h about +y (the axis perpendicular to the sliding, by the right-hand rule: the top
     goes with the plate), h = 2(R − δ) from Hertz; so turn·2R/Δs = 2R/h (1.0078). The plate
     needs no tangential force: measured |μ_eff| 2.4e-7 (tolerance 1e-5); the gap does not
-    change (no dilatancy) and every contact sticks."""
+    change (no dilatancy) and every contact sticks: the state is "roll" (it turned while the
+    plate slid), not "stick"."""
     ds = sphere_run
     out = slice(1, 4)                               # the three steps along +x
     h = hertz_gap(F)
@@ -291,7 +292,10 @@ def test_a_sphere_between_sliding_plates_rolls_without_resistance(sphere_run):
     assert np.abs(move[:, 1:]).max() < 1e-6 * STEP
     assert np.abs(ds.mu_eff_magnitude.values).max() < 1e-5
     assert np.abs(ds.dilatancy.values[1:]).max() < 1e-9 * h
-    assert (sliding(ds, "state").values == tb.schema.STATES.index("stick")).all()
+    # pressed (step 0) it sticks; every step of the plate's slide it rolls without slip
+    state = sliding(ds, "state").values
+    assert state[0] == tb.schema.STATES.index("stick")
+    assert (state[1:] == tb.schema.STATES.index("roll")).all()
     assert (ds.contact_state.values == tb.schema.CONTACT_STATES.index("stick")).all()
 
 
@@ -806,7 +810,7 @@ def test_the_bundled_shear_example_is_a_slide_out_and_back():
 def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
     """The `make shear` example (shear_layer.toml: 8 flat ellipsoids in a periodic box, 80 N),
     its compression and first two sliding steps of 5 µm: every particle is pressed, every
-    contact sticks (the ellipsoids tilt, rolling without slip: `stick` and `turned`), the layer
+    contact sticks (the ellipsoids tilt, rolling without slip: `roll` and `turned`), the layer
     resists (μ_eff > 0) and opens the gap. Rolling without slip, the plates do no net work
     but what the contacts store: per step mean(μ_eff) Δs = Δh + ΔE/F_N, from the dataset's
     own forces and gaps (measured 2.0 % above Δh + ΔE/F_N; tolerance 10 %); the energy
@@ -830,7 +834,7 @@ def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
     assert (ds.loaded.values[slid] == n).all()
     assert (ds.contact_state.values[ds.contact_step.values >= load.compress_steps]
             == tb.schema.CONTACT_STATES.index("stick")).all()
-    assert (ds.state.values[slid] == tb.schema.STATES.index("stick")).all()
+    assert (ds.state.values[slid] == tb.schema.STATES.index("roll")).all()
     assert ds.turned.values[slid].all()
     mu = ds.mu_eff_sliding.values
     assert (mu[slid] > 0).all() and (ds.dilatancy.values[slid] > 0).all()

@@ -25,7 +25,8 @@ placed, ``position`` the centroid's displacement since, not wrapped into a perio
 What a particle did (``state``, :func:`particle_state`): "unloaded" when it touches nothing;
 "stick" when every contact has stick cells (it may still turn a little: a tilted particle
 pressed between two stuck contacts turns as the plates approach, about dh sin φ / |AB| for
-contacts A and B whose line leans φ from the vertical; the paper's model holds it fixed).
+contacts A and B whose line leans φ from the vertical; the paper's model holds it fixed),
+unless it turned in a step in which the plate slid: "roll", rolling without slip.
 Rolling means turning (by more than ``stick_rotation`` in the step): "roll_upper" /
 "roll_lower" when it touches only the plates and turns about the one whose contact sticks
 while the other slides, "slide_lower" / "slide_upper" when it does so without turning (carried
@@ -375,7 +376,8 @@ class NetworkEngine:
         others = [c for c in mine if not isinstance(c.j, str)]
         turned = bool(np.linalg.norm(result.rotation[i]) > self.numerics.stick_rotation)
         state = particle_state(kind, turned, [c.state for c in mine],
-                               {s: c.state for s, c in plate.items()}, bool(others))
+                               {s: c.state for s, c in plate.items()}, bool(others),
+                               step.slides)
         turn = _turn(body.rotation, start)
         values.update(**_pose(body.rotation), **turn, state=state,
                       turned=turned,
@@ -434,18 +436,22 @@ class NetworkEngine:
 
 
 def particle_state(kinematics: str, turned: bool, contact_states: list[str],
-                   plate_states: dict[str, str], touches_particles: bool) -> str:
+                   plate_states: dict[str, str], touches_particles: bool,
+                   slid: bool = False) -> str:
     """What a particle of a network run did in a step (``state``, :data:`thirdbody.schema.STATES`).
 
     ``kinematics`` is the cluster's word for it (:attr:`ClusterResult.kinematics`: "free",
     "stick", "roll", "slide"); ``turned`` whether it turned by more than ``stick_rotation`` in
     the step; ``contact_states`` the state ("stick" or "slide") of each of its loaded
     contacts; ``plate_states`` those of its plate contacts by side ("upper", "lower");
-    ``touches_particles`` whether any loaded contact is with another particle.
+    ``touches_particles`` whether any loaded contact is with another particle; ``slid``
+    whether the upper plate moved sideways in the step.
 
     Rolling means turning. "unloaded": it touches nothing; "stick": no contact slides
-    (whatever it turned: a tilted particle pressed between two stuck contacts turns a little
-    as the plates approach). Every contact sliding: "rotate" if it turns, else "slide". A
+    (whatever it turned under compression: a tilted particle pressed between two stuck
+    contacts turns a little as the plates approach), but "roll" when it turned while the
+    plate slid (rolling without slip: a sphere under the sliding plate). Every contact
+    sliding: "rotate" if it turns, else "slide". A
     particle touching only the two plates, one contact sticking and the other sliding:
     "roll_upper" / "roll_lower" when it turns about the sticking one (the paper's states,
     eqs 4-5), "slide_lower" / "slide_upper" when it does not turn: carried by the plate whose
@@ -457,7 +463,7 @@ def particle_state(kinematics: str, turned: bool, contact_states: list[str],
     if kinematics == "free":
         return "unloaded"
     if kinematics == "stick" or all(c == "stick" for c in contact_states):
-        return "stick"
+        return "roll" if turned and slid else "stick"
     if kinematics == "slide":                       # every contact slides
         return "rotate" if turned else "slide"
     up, low = plate_states.get("upper"), plate_states.get("lower")
