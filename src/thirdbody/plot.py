@@ -606,8 +606,8 @@ def save_state_map(summary, out: str | Path, formats: tuple[str, ...] = ("png", 
 # --- layers ------------------------------------------------------------------------------------
 #: a layer particle's colour by its state in a step (the sweeps' behaviour colours)
 _STATE_COLOURS = {**{k: _BEHAVIOUR_COLOURS[k] for k in ("stick", "roll_upper", "roll_lower",
-                                                         "rotate", "failed")},
-                  "unloaded": "0.75", "roll": "#937860", "slide": "#8172b3",
+                                                         "rotate", "failed", "roll")},
+                  "unloaded": "0.75", "slide": "#8172b3",
                   "slide_upper": "#b3a3d9", "slide_lower": "#5a4a8c"}
 _DEFAULT_STATES = "stick roll_upper roll_lower rotate failed unloaded"
 _MARKER_AREA = 250.0            # pt²: the centroid marker of the run's largest normal force

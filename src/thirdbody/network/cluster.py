@@ -1524,13 +1524,9 @@ def _limit(problem: _Problem, terms: _Terms, active: np.ndarray, scale: float,
     changes by more than ρ _FORCE of itself or of the force scale. Returns (step, dh,
     clipped)."""
     factor = 1.0
-    for k in range(problem.n):
-        rot = float(np.linalg.norm(step[k, 3:]))
-        trans = float(np.linalg.norm(step[k, :3])) / problem.sizes[k]
-        if rot > radius * _ROTATION:
-            factor = min(factor, radius * _ROTATION / rot)
-        if trans > radius * _TRANSLATION:
-            factor = min(factor, radius * _TRANSLATION / trans)
+    reach = _reach(step, problem.sizes)
+    if reach > radius:
+        factor = radius / reach
     d, _ = terms.approach_change(step, dh)
     change = np.where(terms.bem, np.abs(terms.kn * d), terms.kn * np.maximum(d - terms.sigma, 0.0))
     allowed = radius * _FORCE * np.maximum(terms.N, scale)
