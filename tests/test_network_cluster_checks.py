@@ -122,6 +122,12 @@ def test_the_trust_region_scales_the_whole_step_by_its_tightest_limit():
     assert clipped
     np.testing.assert_allclose(out, 0.5 * step, rtol=1e-14)
     assert out_dh == pytest.approx(0.5 * dh, rel=1e-14)
+    # twice that turn, |φ| = 0.1 rad: factor 0.025 / 0.1 (the bound over the turn, not times it)
+    out, out_dh, clipped = cluster._limit(problem(), quiet, np.array([True, True]), 2.0,
+                                          2 * step, dh, rho)
+    assert clipped
+    np.testing.assert_allclose(out, 0.5 * step, rtol=1e-14)
+    assert out_dh == pytest.approx(0.25 * dh, rel=1e-14)
     # the translation over the second particle's size: 2e-4 m = 0.05 sizes, factor 0.025/0.05
     moved = step.copy()
     moved[0, 3:] = 0.0
