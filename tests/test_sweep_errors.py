@@ -159,9 +159,11 @@ def test_a_rerun_of_a_finished_sweep_touches_nothing(tmp_path):
 
 @pytest.mark.slow
 def test_ctrl_c_stops_a_sweep_with_one_line_and_no_error_files(tmp_path):
-    path = _sweep(tmp_path, TINY.replace('"plates.mu" = [0.2, 0.3]',
-                                         '"plates.mu" = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7]')
-                  .replace('"load.steps" = 2', '"load.steps" = 6'))
+    # two short cases and two of 1000 steps: the signal comes when the first step of a case is
+    # saved, while the long ones surely still run (a sleep after it instead let the whole sweep
+    # finish first on a loaded machine: exit 0)
+    path = _sweep(tmp_path, TINY.replace('"load.steps" = 2\n', '')
+                  .replace('[set]', '"load.steps" = [2, 1000]\n\n[set]'))
     out = tmp_path / "out"
     # the whole process group gets the signal, as from a terminal
     proc = subprocess.Popen([sys.executable, "-m", "thirdbody", "sweep", str(path), "-o",
@@ -169,14 +171,16 @@ def test_ctrl_c_stops_a_sweep_with_one_line_and_no_error_files(tmp_path):
                             stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.time() + 120
     while time.time() < deadline and not list((out / "cases").glob("*.nc")):
-        time.sleep(0.2)
-    time.sleep(1.0)
+        time.sleep(0.05)
     os.killpg(os.getpgid(proc.pid), signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "CommClosedError" not in err, err
     assert err.strip().splitlines()[-1].startswith("interrupted"), err
     assert not list((out / "cases").glob("*.error.txt"))
+    # stopped mid-sweep: a long case's file holds the steps it had, marked as running
+    statuses = [open_results(f).attrs["status"] for f in (out / "cases").glob("*.nc")]
+    assert "running" in statuses, statuses
 
 
 @pytest.mark.slow
