@@ -99,7 +99,7 @@ from .broad import candidate_pairs
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
 from .narrow import closest_approach
 from .plate import PlateContact, solve_plate
-from .stiffness import ContactModel, ModelStack, TangentialLaws, _cross, cross
+from .stiffness import ContactModel, ModelStack, TangentialLaws, cross, cross_rows
 
 __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
            "ContactReport", "solve_cluster", "wrap"]
@@ -892,8 +892,8 @@ def _terms(problem: _Problem, ev: _Evaluation) -> _Terms:
     bem = bem.astype(bool)
     # an open contact's wrench: of −N n with N = −k σ
     f = (kn * sigma)[:, None] * models.normal
-    spring_a = np.concatenate([f, _cross(models.arm_a, f)], axis=1)
-    spring_b = np.concatenate([-f, -_cross(models.arm_b, f)], axis=1)
+    spring_a = np.concatenate([f, cross_rows(models.arm_a, f)], axis=1)
+    spring_b = np.concatenate([-f, -cross_rows(models.arm_b, f)], axis=1)
     return _Terms(a, b, np.array([r[2] for r in rows], dtype=bool), models, models.base_a,
                   models.base_b, np.where(bem[:, None], models.wrench_a, spring_a),
                   np.where(bem[:, None], models.wrench_b, spring_b), N, kn, sigma, bem, reach,

@@ -57,7 +57,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["ContactModel", "ModelStack", "TangentialLaws", "skew"]
+__all__ = ["ContactModel", "ModelStack", "TangentialLaws", "cross", "cross_rows", "skew"]
 
 #: a stick contact's tangential stiffness is its partial-slip tangent both ways (False: k0 for a
 #: motion back from the current iterate, the former choice)
@@ -273,7 +273,7 @@ def _outer(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     return u[:, :, None] * v[:, None, :]
 
 
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+def cross_rows(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Row-wise u_i × v_i (m, 3) (:func:`cross`'s arithmetic)."""
     a, b, c = u[:, 0], u[:, 1], u[:, 2]
     d, e, f = v[:, 0], v[:, 1], v[:, 2]
@@ -401,8 +401,8 @@ class ModelStack:
         self.base_b = np.concatenate([-df, dMb], axis=1)
         # the wrenches (m, 6) of the current force and twist on a and b
         moment = twist[:, None] * n
-        self.wrench_a = np.concatenate([f, _cross(ra, f) + moment], axis=1)
-        self.wrench_b = np.concatenate([-f, -_cross(rb, f) - moment], axis=1)
+        self.wrench_a = np.concatenate([f, cross_rows(ra, f) + moment], axis=1)
+        self.wrench_b = np.concatenate([-f, -cross_rows(rb, f) - moment], axis=1)
 
     def laws(self, ds: np.ndarray, dN: np.ndarray) -> TangentialLaws:
         """Each contact's branch of the tangential law at its predicted tangential displacement
@@ -468,5 +468,5 @@ class ModelStack:
         on_a = np.concatenate([dT, np.matmul(self._skew_a, dT)], axis=1)
         on_b = -np.concatenate([dT, np.matmul(self._skew_b, dT)], axis=1)
         c = laws.offset
-        return (on_a, on_b, np.concatenate([c, _cross(self.arm_a, c)], axis=1),
-                -np.concatenate([c, _cross(self.arm_b, c)], axis=1))
+        return (on_a, on_b, np.concatenate([c, cross_rows(self.arm_a, c)], axis=1),
+                -np.concatenate([c, cross_rows(self.arm_b, c)], axis=1))
