@@ -14,13 +14,17 @@ same process, one after the other, and prints whether it converged, its passes a
 seconds; at the end the converged share and the total CPU time of each variant. Run:
 
     .venv/bin/python benchmarks/cluster_robustness.py --sizes 4 5 --seeds 1-16 \\
-        --variants main new
+        --variants main default
 
-Variants: ``main`` is the solver before the switches below existed; ``new`` has all of them
-(the default settings); ``lm``, ``entered`` and ``trial`` add one each to ``main``:
-``_LEVENBERG_MARQUARDT`` (the damped step of groups), ``_ENTERED_BRANCHES`` (the re-solve on
-the branches a step enters) and ``_NO_DESCENT_TRIAL`` (the BEM tries the Newton step that the
-model sees no descent along).
+``--factors 1 2 4`` loads the same first step by 1, 2 and 4 times 0.025 N a sphere (the first
+step of a compression in 20, 10 or 5 steps): how the failures depend on how far the plate
+presses into the spread of the spheres' heights.
+
+Variants: ``main`` is the solver before the switches below existed; ``default`` is the
+solver as shipped (``trial`` and ``entered`` on, ``lm`` off); ``lm``, ``entered`` and
+``trial`` add one each to ``main``: ``_LEVENBERG_MARQUARDT`` (the damped step of groups),
+``_ENTERED_BRANCHES`` (the re-solve on the branches a step enters) and ``_NO_DESCENT_TRIAL``
+(the BEM tries the Newton step that the model sees no descent along).
 """
 
 from __future__ import annotations
@@ -53,13 +57,14 @@ def seeds(text: str) -> list[int]:
     return out
 
 
-def first_step(n: int, seed: int) -> tuple[bool, int, float]:
-    """(converged, passes, CPU seconds) of the first compression step of one lattice."""
+def first_step(n: int, seed: int, factor: float = 1.0) -> tuple[bool, int, float]:
+    """(converged, passes, CPU seconds) of the first compression step of one lattice, its load
+    (0.025 N a sphere) times ``factor``."""
     bodies, side = lattice(n, 5e-4, 0.0, seed)
     cpu = time.process_time()
     try:
         result = solve_cluster(bodies, {}, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
-                               force=0.5 * n * n / 20, box=(side, side),
+                               force=factor * 0.5 * n * n / 20, box=(side, side),
                                numerics=ClusterNumerics(resolution=20.0, tol=1e-5))
     except ClusterConvergenceError:
         return False, 0, time.process_time() - cpu
@@ -72,9 +77,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seeds", type=seeds, default=seeds("1-8"))
     parser.add_argument("--variants", nargs="+", choices=sorted(VARIANTS),
                         default=["main", "default"])
+    parser.add_argument("--factors", type=float, nargs="+", default=[1.0],
+                        help="the first step's load times each of these (default 1: 0.025 N "
+                             "a sphere)")
     args = parser.parse_args(argv)
     saved = {name: getattr(cluster, name) for name in VARIANTS["main"]}
-    totals = {v: [0, 0, 0.0] for v in args.variants}      # converged, cases, CPU s
+    # converged, cases, CPU s
+    totals = {(v, f): [0, 0, 0.0] for v in args.variants for f in args.factors}
     try:
         for n in args.sizes:
             for seed in args.seeds:
@@ -82,19 +91,21 @@ def main(argv: list[str] | None = None) -> None:
                 for variant in args.variants:
                     for name, value in VARIANTS[variant].items():
                         setattr(cluster, name, value)
-                    ok, passes, cpu = first_step(n, seed)
-                    total = totals[variant]
-                    total[0] += ok
-                    total[1] += 1
-                    total[2] += cpu
-                    line.append(f"{variant} {f'{passes:3d} passes' if ok else 'FAILED    '} "
-                                f"{cpu:6.1f} s")
+                    for factor in args.factors:
+                        ok, passes, cpu = first_step(n, seed, factor)
+                        total = totals[(variant, factor)]
+                        total[0] += ok
+                        total[1] += 1
+                        total[2] += cpu
+                        label = variant if len(args.factors) == 1 else f"{variant} x{factor:g}"
+                        line.append(f"{label} {f'{passes:3d} passes' if ok else 'FAILED    '} "
+                                    f"{cpu:6.1f} s")
                 print("  ".join(line), flush=True)
     finally:
         for name, value in saved.items():
             setattr(cluster, name, value)
-    for variant, (ok, cases, cpu) in totals.items():
-        print(f"{variant}: {ok} of {cases} converged, CPU {cpu:.0f} s")
+    for (variant, factor), (ok, cases, cpu) in totals.items():
+        print(f"{variant}, first load x{factor:g}: {ok} of {cases} converged, CPU {cpu:.0f} s")
 
 
 if __name__ == "__main__":
