@@ -47,7 +47,16 @@ from .. import schema
 from ..loading import LoadStep
 from ..records import LayerRecord, StepRecord, _particle_names, _pose, _turn
 from .body import Body
-from .cluster import ClusterNumerics, ClusterResult, solve_cluster, wrap
+from .cluster import ClusterConvergenceError, ClusterNumerics, ClusterResult, solve_cluster, wrap
+
+#: appended to the error of a failed first step of several particles (measured: the first step
+#: of touching lattices fails far more often when the plate barely reaches some particles;
+#: docs/methods/network.md)
+FIRST_STEP_HINT = ("This is the first step from rest, where particles that the plate barely "
+                   "reaches are the hardest to balance: a first step that presses the plate "
+                   "further into the layer (a larger first load, or fewer load steps) converges "
+                   "more often (docs/methods/network.md, \"How often a touching lattice's first "
+                   "step converges\")")
 
 __all__ = ["NetworkEngine", "NetworkState", "particle_state"]
 
@@ -254,10 +263,15 @@ class NetworkEngine:
         else:
             load = {"gap": self.d0 * (1.0 - step.value)}
         sliding = _Sliding.after(state, step)           # refuses a slide before any load
-        result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
-                               mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
-                               plate_shift=step.shift, numerics=self.numerics,
-                               guess=_predicted(state.last_step, step, state.gap), **load)
+        try:
+            result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
+                                   mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
+                                   plate_shift=step.shift, numerics=self.numerics,
+                                   guess=_predicted(state.last_step, step, state.gap), **load)
+        except ClusterConvergenceError as exc:
+            if state.gap is None and len(state.bodies) > 1:
+                raise ClusterConvergenceError(f"{exc}. {FIRST_STEP_HINT}") from exc
+            raise
         starts = [b.rotation for b in state.bodies]
         bodies, histories = list(result.bodies), dict(result.histories)
         if self.box is not None:
