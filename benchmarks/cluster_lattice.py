@@ -20,6 +20,10 @@ network: the larger spheres press their neighbours along oblique normals.
 
     .venv/bin/python benchmarks/cluster_lattice.py --sizes 8 --gap 0 --spread 5e-4 --steps 20
 
+``--seed`` draws other radii; ``--first F`` loads the first step with F newtons a particle and
+the others in equal steps from there to 0.5 N (a first step that presses the plate past the
+spread of the heights: ``docs/methods/network.md``, how often the first step converges).
+
 ``--guess`` starts each step from the secant predictor a run uses (the last step's motion times
 the ratio of the load increments: ``thirdbody.network.run._predicted``); ``--guess both`` runs
 the program with and without it, alternating in one process, and prints the passes and CPU
@@ -58,11 +62,15 @@ def lattice(n: int, spread: float, gap: float, seed: int = 1) -> tuple[list[Body
 
 
 def compress(n: int, spread: float, gap: float, steps: int, resolution: float,
-             guess: bool = False) -> tuple[int, float] | None:
+             guess: bool = False, seed: int = 1,
+             first: float | None = None) -> tuple[int, float] | None:
     """F_N in ``steps`` equal steps to 0.5 N per particle, warm started step to step (and
-    from the secant predictor if ``guess``). Returns the passes and the CPU seconds, or None
-    when a step failed."""
-    bodies, side = lattice(n, spread, gap)
+    from the secant predictor if ``guess``); with ``first`` (N per particle) the first step
+    loads that much and the others rise in equal steps from there. Returns the passes and the
+    CPU seconds, or None when a step failed."""
+    bodies, side = lattice(n, spread, gap, seed)
+    per = (0.5 * np.arange(1, steps + 1) / steps if first is None
+           else np.linspace(first, 0.5, steps))
     numerics = ClusterNumerics(resolution=resolution, tol=1e-5)
     histories, gap_start, total = {}, None, time.perf_counter()
     cpu = time.process_time()
@@ -71,7 +79,7 @@ def compress(n: int, spread: float, gap: float, steps: int, resolution: float,
     last = None
     for k in range(1, steps + 1):
         start = time.perf_counter()
-        force = 0.5 * n * n * k / steps
+        force = n * n * float(per[k - 1])
         step = LoadStep("force", force)
         try:
             result = solve_cluster(bodies, histories, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
@@ -84,8 +92,8 @@ def compress(n: int, spread: float, gap: float, steps: int, resolution: float,
             return None
         seconds = time.perf_counter() - start
         if gap_start is not None:
-            last = _LastStep("force", force, 0.5 * n * n / steps, (0.0, 0.0), result.translation,
-                             result.rotation, result.gap - gap_start)
+            last = _LastStep("force", force, n * n * float(per[k - 1] - per[k - 2]), (0.0, 0.0),
+                             result.translation, result.rotation, result.gap - gap_start)
         bodies, histories, gap_start = list(result.bodies), result.histories, result.gap
         pairs = [c for c in result.contacts if isinstance(c.j, int) and c.normal_force > 0]
         t = result.timings
@@ -93,7 +101,7 @@ def compress(n: int, spread: float, gap: float, steps: int, resolution: float,
             shares[name] += t.get(name, 0.0)
         passes += result.iterations
         solves += result.bem_solves
-        print(f"{n * n:4d} particles, step {k:2d}: F_N {0.5 * n * n * k / steps:6.2f} N, "
+        print(f"{n * n:4d} particles, step {k:2d}: F_N {force:6.2f} N, "
               f"{result.iterations:2d} passes, "
               f"{result.bem_solves / max(len(result.contacts), 1):4.1f} BEM solves per contact, "
               f"{seconds:6.1f} s (detection {t.get('narrow', 0) / seconds:4.0%}, BEM "
@@ -119,13 +127,17 @@ def main(argv: list[str] | None = None) -> None:
                         help="a compression program of this many force steps (0: one solve)")
     parser.add_argument("--guess", choices=("no", "yes", "both"), default="no",
                         help="start each step from the secant predictor (both: A/B)")
+    parser.add_argument("--seed", type=int, default=1, help="seed of the radii")
+    parser.add_argument("--first", type=float, default=None,
+                        help="the first step's load, N per particle (default: 0.5 N / steps)")
     args = parser.parse_args(argv)
     for n in args.sizes:
         if args.steps:
             modes = {"no": [False], "yes": [True], "both": [True, False, True, False]}
             runs = {True: [], False: []}
             for guess in modes[args.guess]:
-                out = compress(n, args.spread, args.gap, args.steps, args.resolution, guess)
+                out = compress(n, args.spread, args.gap, args.steps, args.resolution, guess,
+                               args.seed, args.first)
                 if out is not None:
                     runs[guess].append(out)
             if args.guess == "both" and runs[True] and runs[False]:
@@ -134,7 +146,7 @@ def main(argv: list[str] | None = None) -> None:
                       f"{runs[False][0][0]} not; CPU best of {len(runs[True])}: "
                       f"{best[True]:.0f} / {best[False]:.0f} s = {best[True] / best[False]:.2f}")
             continue
-        bodies, side = lattice(n, args.spread, args.gap)
+        bodies, side = lattice(n, args.spread, args.gap, args.seed)
         start = time.perf_counter()
         try:
             result = solve_cluster(bodies, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
