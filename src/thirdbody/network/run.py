@@ -55,8 +55,8 @@ from .cluster import ClusterConvergenceError, ClusterNumerics, ClusterResult, so
 FIRST_STEP_HINT = ("This is the first step from rest, where particles that the plate barely "
                    "reaches are the hardest to balance: a first step that presses the plate "
                    "further into the layer (a larger first force, `start` of a linear_ramp, or "
-                   "fewer load steps) converges more often (docs/methods/network.md, \"How "
-                   "often a touching lattice's first step converges\")")
+                   "fewer load steps) converges more often (docs/methods/network.md, \"What "
+                   "the first load decides\")")
 
 __all__ = ["NetworkEngine", "NetworkState", "particle_state"]
 
