@@ -244,6 +244,9 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
        "contact force, moments over it times the particle's size, the plate force over F_N)"),
     _v("network_iterations", "step", "1", "network runs: BEM passes over every contact in the "
                                           "step", dtype="int64", fill=0),
+    _v("network_substeps", "step", "1",
+       "network runs: the sub-steps the step was solved in (1; 2, 4, ... when it did not "
+       "converge whole and was cut into halves: network.cutbacks)", dtype="int64", fill=0),
     # --- sliding plates (design notes §3d; loading.Slide) ---------------------------------
     _v("plate_shift", "step component", "m",
        "s: horizontal displacement of the upper plate relative to the lower one since the "

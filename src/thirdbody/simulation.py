@@ -140,6 +140,11 @@ class Simulation:
         With ``mu_pp``: the equilibrium tolerance of each step (the largest force residual over
         the mean contact force, moments over it times the particle's size, the plate force over
         F_N). ``tol`` stays the BEM solvers' tolerance.
+    network_cutbacks : int
+        With ``mu_pp``: how many times a load step after the first that does not converge is
+        cut into halves (each half that fails into halves again), 0–8; the step's record is its
+        end (``network_substeps`` says how many sub-steps it took). 0: a step that fails ends
+        the run at once.
     """
 
     #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
@@ -151,7 +156,7 @@ class Simulation:
                  maps_every: int = 5, classification: str = "statics",
                  twist_tol: float = 1e-3, workers: int = 1, coupling: bool = False,
                  mu_pp: float | None = None, box: tuple[float, float] | None = None,
-                 network_tol: float = 1e-6) -> None:
+                 network_tol: float = 1e-6, network_cutbacks: int = 3) -> None:
         from ._validate import positive, real
 
         if isinstance(particle, Layer):
@@ -237,11 +242,18 @@ class Simulation:
                                      f"got {box!r}")
             self.box = box
             self.network_tol = positive("network_tol (network.tol)", network_tol)
+            if (isinstance(network_cutbacks, bool)
+                    or not isinstance(network_cutbacks, (int, np.integer))
+                    or not 0 <= network_cutbacks <= 8):
+                raise ValueError(f"network_cutbacks (network.cutbacks) must be an integer in "
+                                 f"[0, 8], got {network_cutbacks!r}")
+            self.network_cutbacks = int(network_cutbacks)
             if coupling:
                 raise ValueError("coupling (numerics.coupling) is not available with mu_pp "
                                  "(network.mu_pp): the network's contacts are uncoupled")
             self.network = NetworkEngine(self.layer, plates, self.mu_pp, box, cells,
-                                         self.network_tol, self.tol, self.d0)
+                                         self.network_tol, self.tol, self.d0,
+                                         self.network_cutbacks)
         self.records: list = []
         self.maps: list = []
         self.status = "not run"
@@ -284,7 +296,8 @@ class Simulation:
             "maps_every": self.maps_every, "classification": self.classification,
             "twist_tol": self.twist_tol, "d0": self.d0,
             **({"coupling": 1} if self.coupling else {}),
-            **({"mu_pp": self.mu_pp, "network_tol": self.network_tol} if self.network else {}),
+            **({"mu_pp": self.mu_pp, "network_tol": self.network_tol,
+                "network_cutbacks": self.network_cutbacks} if self.network else {}),
             **({"box": list(self.box)} if self.box is not None else {}),
         }
         if self.single:

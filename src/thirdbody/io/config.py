@@ -306,6 +306,9 @@ class Network(_Model):
                           "the [layer] box")
     tol: Annotated[float, Field(strict=True, gt=0, lt=1e-2,
                                 description="equilibrium tolerance of each step")] = 1e-6
+    cutbacks: Annotated[int, Field(strict=True, ge=0, le=8,
+                                   description="how many times a load step that does not "
+                                               "converge is cut into halves")] = 3
 
     @model_validator(mode="after")
     def _box_is_periodic(self):
@@ -441,7 +444,7 @@ class Config(_Model):
             if net.periodic and box is None:
                 box = self.layer.box            # required by _one_body otherwise
             numerics.update(mu_pp=net.mu_pp, box=box if net.periodic else None,
-                            network_tol=net.tol)
+                            network_tol=net.tol, network_cutbacks=net.cutbacks)
         return body, plates, load, numerics
 
     def to_toml(self) -> str:

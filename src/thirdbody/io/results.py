@@ -188,7 +188,7 @@ def upgrade(ds):
 #: (None: the variable's blank)
 _NETWORK_ERA = {"fraction_slide": 0.0, "plate_normal_force": None, "translation": None,
                 "particle_contacts": None, "coordination": None, "both_plates_force": None,
-                "network_residual": None, "network_iterations": None,
+                "network_residual": None, "network_iterations": None, "network_substeps": None,
                 # sliding plates: a file written before them never slid (plate_shift and
                 # sliding_distance 0, mu_eff_sliding and dilatancy NaN); mu_eff from its
                 # plate_force and total_force

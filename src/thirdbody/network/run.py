@@ -36,12 +36,15 @@ by one plate, sliding on the other), "rotate" / "slide" when every contact slide
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .. import schema
 from ..loading import LoadStep
@@ -58,7 +61,12 @@ FIRST_STEP_HINT = ("This is the first step from rest, where particles that the p
                    "fewer load steps) converges more often (docs/methods/network.md, \"What "
                    "the first load decides\")")
 
-__all__ = ["NetworkEngine", "NetworkState", "particle_state"]
+#: how many times a failed step is halved by default (down to 1/8 of it; measured: the first
+#: sliding step of 100 touching spheres, 20 um, converges as 8 sub-steps of 2.5 um, and the
+#: later 20 um steps in 2-3 passes; docs/methods/network.md, "Cut steps")
+CUTBACKS = 3
+
+__all__ = ["CUTBACKS", "NetworkEngine", "NetworkState", "particle_state"]
 
 #: ``contact_j`` of a plate contact
 PLATE_INDEX = {"lower": -1, "upper": -2}
@@ -186,6 +194,81 @@ class _Sliding(NamedTuple):
         return math.nan if self.slide_gap is None else gap - self.slide_gap
 
 
+class _Energy(NamedTuple):
+    """The energy terms of a (sub-)step, J (:meth:`NetworkEngine._energy`)."""
+
+    work: float         # the upper plate's work on the particles
+    stored0: float      # the contacts' elastic energy at the start
+    stored: float       # ... and at the end
+    dissipated: float   # their frictional dissipation in the step
+    gap_change: float   # Δh, m
+
+
+class _Part(NamedTuple):
+    """A solved (sub-)step: what it loaded, its equilibrium and its energy terms."""
+
+    step: LoadStep
+    result: ClusterResult
+    energy: _Energy
+
+
+def _balance(parts: list[_Energy], step: LoadStep, normal_force: float) -> dict:
+    """The step's energy balance from the terms of its sub-steps (one when it was not cut):
+    the plate's work and the dissipation summed, the elastic energy at the end, and the
+    residual (W − (E_end − E_start) − D) over F_N (|Δs| + |Δh|), F_N at the end (NaN when that
+    scale is zero)."""
+    work = math.fsum(p.work for p in parts)
+    dissipated = math.fsum(p.dissipated for p in parts)
+    stored = parts[-1].stored
+    scale = normal_force * (math.hypot(*step.shift) + abs(math.fsum(p.gap_change for p in parts)))
+    residual = ((work - (stored - parts[0].stored0) - dissipated) / scale if scale > 0
+                else math.nan)
+    return dict(plate_work=work, elastic_energy=stored, dissipation=dissipated,
+                energy_residual=residual)
+
+
+def _halves(step: LoadStep, state: NetworkState, d0: float) -> tuple[LoadStep, LoadStep]:
+    """``step`` from ``state`` as two equal halves: each moves the plate by half the shift,
+    the first to the load value midway between the state's and the step's. The state's value
+    is the last step's when it was of the same kind, else the state's own (the upper plate's
+    normal force, N, or the compression (d₀ − h)/d₀)."""
+    if state.last_step is not None and state.last_step.kind == step.kind:
+        now = state.last_step.value
+    elif step.kind == "force":
+        now = -math.fsum(float(h.solved.force[2]) for h in state.histories.values()
+                         if getattr(h.solved, "side", None) == "upper")
+    else:
+        now = (d0 - state.gap) / d0
+    half = tuple(0.5 * float(v) for v in step.shift)
+    return (LoadStep(step.kind, now + 0.5 * (step.value - now), half),
+            LoadStep(step.kind, step.value, half))
+
+
+def _combined(results: list[ClusterResult]) -> ClusterResult:
+    """The equilibrium at the end of the last of ``results`` (consecutive sub-steps), with
+    the step's motion: translations summed, rotations composed, and each contact's slip and
+    rigid shift increment summed over the sub-steps it was in; passes and BEM solves summed."""
+    last = results[-1]
+    if len(results) == 1:
+        return last
+    turn = Rotation.from_rotvec(results[0].rotation)
+    for r in results[1:]:
+        turn = Rotation.from_rotvec(r.rotation) * turn
+    slips: dict = {}
+    for r in results:
+        for c in r.contacts:
+            s, t = slips.get(c.key, (0.0, 0.0))
+            slips[c.key] = (s + np.asarray(c.slip), t + np.asarray(c.shift_increment))
+    contacts = tuple(dataclasses.replace(c, slip=slips[c.key][0],
+                                         shift_increment=slips[c.key][1])
+                     for c in last.contacts)
+    return dataclasses.replace(
+        last, translation=sum(r.translation for r in results),
+        rotation=turn.as_rotvec().reshape(last.rotation.shape), contacts=contacts,
+        iterations=sum(r.iterations for r in results),
+        bem_solves=sum(r.bem_solves for r in results))
+
+
 class NetworkEngine:
     """The load steps of a layer of touching particles.
 
@@ -208,11 +291,15 @@ class NetworkEngine:
         Tolerance of the BEM solves.
     d0 : float
         The gap at which the tallest particle first touches, m (compression control).
+    cutbacks : int
+        How many times a step after the first that does not converge is halved (0: never;
+        :meth:`step`).
     """
 
     def __init__(self, layer, plates, mu_pp, box, cells: list[float], tol: float,
-                 solver_tol: float, d0: float) -> None:
+                 solver_tol: float, d0: float, cutbacks: int = CUTBACKS) -> None:
         self.layer, self.plates, self.mu_pp = layer, plates, mu_pp
+        self.cutbacks = int(cutbacks)
         self.d0 = d0
         self.box = None if box is None else (float(box[0]), float(box[1]))
         # the cluster's coordinates: the layer's, moved so that a box starts at the origin
@@ -256,68 +343,106 @@ class NetworkEngine:
     def step(self, k: int, step: LoadStep, state: NetworkState) -> LayerRecord:
         """Solve load step ``k`` from ``state`` (replaced in place by the step's end). Raises
         :class:`~thirdbody.network.cluster.ClusterConvergenceError` (or ValueError for bad
-        geometry) when the step cannot be solved; ``state`` is then unchanged."""
+        geometry) when the step cannot be solved; ``state`` is then unchanged.
+
+        A step after the first that does not converge is solved again as two halves, each
+        half that fails as two halves again, down to 1/2^``cutbacks`` of the step
+        (:meth:`_parts`); the step's record is then its end, with the motion, slips and
+        energies summed over the sub-steps and ``network_substeps`` saying how many there
+        were."""
         t0 = time.perf_counter()
+        sliding = _Sliding.after(state, step)           # refuses a slide before any load
+        trial = copy.copy(state)                        # its fields are replaced, not changed
+        try:
+            parts = self._parts(step, trial, 0)
+        except ClusterConvergenceError as exc:
+            if state.gap is None and len(state.bodies) > 1:
+                raise ClusterConvergenceError(f"{exc}. {FIRST_STEP_HINT}") from exc
+            if state.gap is not None and self.cutbacks > 0:
+                raise ClusterConvergenceError(
+                    f"{exc} (the step was also cut into halves, down to 1/{2 ** self.cutbacks} "
+                    f"of it: network.cutbacks = {self.cutbacks})") from exc
+            raise
+        result = _combined([p.result for p in parts])
+        starts = [b.rotation for b in state.bodies]
+        displacement = state.displacement + result.translation
+        energy = _balance([p.energy for p in parts], step, result.normal_force)
+        record = self._record(k, step, result, starts, displacement, sliding, energy,
+                              time.perf_counter() - t0, state.histories, state.plate_shift)
+        record.values["network_substeps"] = len(parts)
+        # the predictor's secant is the whole step's (its load increment and motion)
+        trial.last_step = self._last_step(step, state, result)
+        state.__dict__.update(trial.__dict__)
+        return record
+
+    def _parts(self, step: LoadStep, state: NetworkState, level: int) -> list[_Part]:
+        """Solve ``step`` from ``state`` and advance ``state`` to its end (:meth:`_advance`);
+        if it does not converge and ``level`` < ``cutbacks``, solve its two halves
+        (:func:`_halves`) one after the other instead. Returns the solved (sub-)steps in
+        order. Raises ClusterConvergenceError when a (sub-)step at the deepest level fails
+        (``state`` may then be partly advanced: :meth:`step` passes a copy)."""
         if step.kind == "force":
             load = {"force": step.value, "gap_start": state.gap}
         else:
             load = {"gap": self.d0 * (1.0 - step.value)}
-        sliding = _Sliding.after(state, step)           # refuses a slide before any load
         try:
             result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
                                    mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
                                    plate_shift=step.shift, numerics=self.numerics,
                                    guess=_predicted(state.last_step, step, state.gap), **load)
-        except ClusterConvergenceError as exc:
-            if state.gap is None and len(state.bodies) > 1:
-                raise ClusterConvergenceError(f"{exc}. {FIRST_STEP_HINT}") from exc
-            raise
-        starts = [b.rotation for b in state.bodies]
+        except ClusterConvergenceError:
+            if state.gap is None or level >= self.cutbacks:
+                raise
+            first, second = _halves(step, state, self.d0)
+            return self._parts(first, state, level + 1) + self._parts(second, state, level + 1)
+        part = _Part(step, result, self._energy(step, state, result))
+        self._advance(state, step, result)
+        return [part]
+
+    def _advance(self, state: NetworkState, step: LoadStep, result: ClusterResult) -> None:
+        """Replace ``state``'s fields by the end of ``step`` (solved as ``result``)."""
         bodies, histories = list(result.bodies), dict(result.histories)
         if self.box is not None:
             bodies, histories = wrap(bodies, histories, self.box)
-        displacement = state.displacement + result.translation
-        energy = self._energy(step, state, result)
-        record = self._record(k, step, result, starts, displacement, sliding, energy,
-                              time.perf_counter() - t0, state.histories, state.plate_shift)
+        sliding = _Sliding.after(state, step)
+        state.last_step = self._last_step(step, state, result)
+        state.bodies, state.histories, state.gap = bodies, histories, result.gap
+        state.displacement = state.displacement + result.translation
+        (state.plate_shift, state.sliding_distance, state.slide_gap,
+         state.slide_direction) = sliding
+
+    @staticmethod
+    def _last_step(step: LoadStep, state: NetworkState, result: ClusterResult) -> _LastStep:
+        """What the next step predicts from: ``step`` taken from ``state`` (before it), ending
+        at ``result``."""
         previous = (0.0 if state.last_step is None or state.last_step.kind != step.kind
                     else state.last_step.value)
         # kept from the first step too, for its load value (its gap change is unknown: NaN)
-        state.last_step = _LastStep(step.kind, step.value, step.value - previous,
-                                    tuple(float(v) for v in step.shift), result.translation,
-                                    result.rotation,
-                                    math.nan if state.gap is None else result.gap - state.gap)
-        state.bodies, state.histories, state.gap = bodies, histories, result.gap
-        state.displacement = displacement
-        (state.plate_shift, state.sliding_distance, state.slide_gap,
-         state.slide_direction) = sliding
-        return record
+        return _LastStep(step.kind, step.value, step.value - previous,
+                         tuple(float(v) for v in step.shift), result.translation,
+                         result.rotation,
+                         math.nan if state.gap is None else result.gap - state.gap)
 
     # --- the step's energy --------------------------------------------------------------------
-    def _energy(self, step: LoadStep, state: NetworkState, result: ClusterResult) -> dict:
-        """The step's energy balance (design notes §3d): the upper plate's work on the
-        particles W = F̄ · Δu (trapezoid: F̄ the mean of its force on them at the start and the
-        end of the step, Δu = (Δs_x, Δs_y, Δh); so W = F_T·Δs − F_N·Δh with F_T the plate's
-        tangential force on them), the stored elastic energy E of every contact at the end,
-        their frictional dissipation D in the step, and the residual (W − ΔE − D) over
-        F_N (|Δs| + |Δh|) (:func:`_contact_energy`). The step's start is the state's histories
-        (the first step: no contact, the gap d₀)."""
+    def _energy(self, step: LoadStep, state: NetworkState, result: ClusterResult) -> _Energy:
+        """The step's energy terms (design notes §3d; the balance is :func:`_balance`): the
+        upper plate's work on the particles W = F̄ · Δu (trapezoid: F̄ the mean of its force
+        on them at the start and the end of the step, Δu = (Δs_x, Δs_y, Δh); so W = F_T·Δs −
+        F_N·Δh with F_T the plate's tangential force on them), the stored elastic energy E of
+        every contact at the start and at the end, and their frictional dissipation D in the
+        step (:func:`_contact_energy`). The step's start is the state's histories (the first
+        step: no contact, the gap d₀)."""
         start = [h.solved for h in state.histories.values()]
         upper = [c.force for c in start if getattr(c, "side", None) == "upper"]
         force0 = np.array([math.fsum(f[d] for f in upper) for d in range(3)])
         gap0 = self.d0 if state.gap is None else state.gap
         move = np.array([*step.shift, result.gap - gap0], dtype=float)
         mean = 0.5 * (force0 + np.asarray(result.plate_force, dtype=float))
-        work = math.fsum(mean * move)
-        stored0 = math.fsum(_contact_energy(c)[0] for c in start)
         ends = [_contact_energy(h.solved) for h in result.histories.values()]
-        stored = math.fsum(e[0] for e in ends)
-        dissipated = math.fsum(e[1] for e in ends)
-        scale = result.normal_force * (math.hypot(*step.shift) + abs(move[2]))
-        residual = ((work - (stored - stored0) - dissipated) / scale if scale > 0
-                    else math.nan)
-        return dict(plate_work=work, elastic_energy=stored, dissipation=dissipated,
-                    energy_residual=residual)
+        return _Energy(work=math.fsum(mean * move),
+                       stored0=math.fsum(_contact_energy(c)[0] for c in start),
+                       stored=math.fsum(e[0] for e in ends),
+                       dissipated=math.fsum(e[1] for e in ends), gap_change=float(move[2]))
 
     # --- the step's records ------------------------------------------------------------------
     def _record(self, k: int, step: LoadStep, result: ClusterResult, starts, displacement,
