@@ -349,7 +349,7 @@ class NetworkEngine:
         half that fails as two halves again, down to 1/2^``cutbacks`` of the step
         (:meth:`_parts`); the step's record is then its end, with the motion, slips and
         energies summed over the sub-steps and ``network_substeps`` saying how many there
-        were."""
+        were; the next step is predicted from the last sub-step (:func:`_predicted`)."""
         t0 = time.perf_counter()
         sliding = _Sliding.after(state, step)           # refuses a slide before any load
         trial = copy.copy(state)                        # its fields are replaced, not changed
@@ -370,8 +370,9 @@ class NetworkEngine:
         record = self._record(k, step, result, starts, displacement, sliding, energy,
                               time.perf_counter() - t0, state.histories, state.plate_shift)
         record.values["network_substeps"] = len(parts)
-        # the predictor's secant is the whole step's (its load increment and motion)
-        trial.last_step = self._last_step(step, state, result)
+        # the next step is predicted from the last sub-step, the latest motion (measured: from
+        # the whole step, whose first sub-steps took the stick-slide transition, the second
+        # sliding step of 100 touching spheres failed; from its last sub-step it took 3 passes)
         state.__dict__.update(trial.__dict__)
         return record
 
