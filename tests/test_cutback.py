@@ -190,6 +190,46 @@ def test_without_cutbacks_a_step_that_fails_ends_the_run(monkeypatch):
     assert calls == 3 and ds.sizes["step"] == 2
 
 
+def test_only_the_whole_step_and_the_deepest_cut_get_the_solvers_retries(monkeypatch):
+    # the sub-steps between give up after the first attempt: halving is cheaper than retries
+    retries = []
+
+    def planted(*args, **kwargs):
+        retries.append(kwargs["retry"])
+        if len(retries) >= 3:
+            raise ClusterConvergenceError("cluster equilibrium stalled (planted)")
+        return SOLVE(*args, **kwargs)
+
+    monkeypatch.setattr(network_run, "solve_cluster", planted)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(CASES["sliding"][1])),
+                            mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
+                            network_cutbacks=3)
+        sim.run()
+    assert retries == [True, True, True, False, False, True]
+
+
+def test_the_solver_without_retries_raises_its_first_attempts_error(monkeypatch):
+    from thirdbody.network import cluster
+
+    attempts = []
+
+    def stalls(problem, h, **kwargs):
+        problem.phase_one_used = True           # so that the retry without it is tried too
+        attempts.append(kwargs.get("phase_one"))
+        raise ClusterConvergenceError(f"attempt {len(attempts)} stalled (planted)")
+
+    monkeypatch.setattr(cluster, "_iterate", stalls)
+    body = tb.network.Body(FLAT.shape, MAT, FLAT.orientation, np.array([0.0, 0.0, 0.2e-3]))
+    for retry, count in ((False, 1), (True, 3)):
+        attempts.clear()
+        with pytest.raises(ClusterConvergenceError, match="attempt 1 stalled"):
+            cluster.solve_cluster([body], mu_up=0.6, mu_low=0.3, force=F, retry=retry,
+                                  numerics=cluster.ClusterNumerics(resolution=20))
+        assert len(attempts) == count
+
+
 @pytest.mark.parametrize("cutbacks", [1, 2])
 def test_a_step_that_fails_at_every_cut_names_the_depth_and_leaves_the_run_as_it_was(
         monkeypatch, cutbacks):
@@ -292,6 +332,12 @@ def test_a_cut_step_turns_by_its_sub_steps_composed_and_predicts_from_the_last(m
         expected = _matrix(second.rotation[i]) @ _matrix(first.rotation[i])
         assert _matrix(whole.rotation[i]) == pytest.approx(expected, abs=1e-15)
     assert np.linalg.norm(first.rotation) > 1e-4 and np.linalg.norm(second.rotation) > 1e-4
+    # these two nearly commute (both tilt about y); two large turns about x, then z, do not
+    about_x = dataclasses.replace(first, rotation=np.array([[0.3, 0.0, 0.0]]))
+    about_z = dataclasses.replace(second, rotation=np.array([[0.0, 0.0, 0.5]]))
+    turned = network_run._combined([about_x, about_z]).rotation[0]
+    assert _matrix(turned) == pytest.approx(_matrix([0, 0, 0.5]) @ _matrix([0.3, 0, 0]),
+                                            abs=1e-14)
     last = state.last_step
     assert (last.kind, last.value, last.normal, last.shift) == ("force", F, 0.0, (S / 2, 0.0))
     assert np.array_equal(last.translation, second.translation)

@@ -1565,7 +1565,8 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
                   mu_low: float, mu_pp=0.0, gap: float | None = None,
                   force: float | None = None, gap_start: float | None = None,
                   plate_shift=(0.0, 0.0), box=None,
-                  numerics: ClusterNumerics | None = None, guess=None) -> ClusterResult:
+                  numerics: ClusterNumerics | None = None, guess=None,
+                  retry: bool = True) -> ClusterResult:
     """The equilibrium of a cluster of particles between the plates (module docstring).
 
     Parameters
@@ -1604,6 +1605,10 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
         largest scaled residual is above :data:`GUESS_LIMIT`, the step starts from the start
         poses as without a guess (that pass is counted). Either way the answer is an
         equilibrium within ``numerics.tol``: a guess changes the passes, not what converged.
+    retry : bool
+        When the first attempt fails, try again without the rotation-free phase and then with
+        models that learn from the BEM (the default); False raises the first attempt's error
+        at once (a run that can still cut the step into halves does so instead).
 
     Returns
     -------
@@ -1664,6 +1669,8 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
     try:
         return _iterate(problem, h, phase_one=True, guess=predicted)
     except ClusterConvergenceError as first:
+        if not retry:
+            raise
         failed = problem.failed
         # the rotation-free first phase can leave the iteration in a state it does not leave
         # (before sliding contacts started the Newton step on their stick branch: a sphere

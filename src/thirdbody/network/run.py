@@ -379,8 +379,10 @@ class NetworkEngine:
     def _parts(self, step: LoadStep, state: NetworkState, level: int) -> list[_Part]:
         """Solve ``step`` from ``state`` and advance ``state`` to its end (:meth:`_advance`);
         if it does not converge and ``level`` < ``cutbacks``, solve its two halves
-        (:func:`_halves`) one after the other instead. Returns the solved (sub-)steps in
-        order. Raises ClusterConvergenceError when a (sub-)step at the deepest level fails
+        (:func:`_halves`) one after the other instead. The whole step and the deepest
+        sub-steps get every attempt of :func:`solve_cluster`; the sub-steps between give up
+        after the first (``retry=False``), since halving them again is cheaper than its
+        retries. Returns the solved (sub-)steps in order. Raises ClusterConvergenceError when a (sub-)step at the deepest level fails
         (``state`` may then be partly advanced: :meth:`step` passes a copy)."""
         if step.kind == "force":
             load = {"force": step.value, "gap_start": state.gap}
@@ -390,7 +392,8 @@ class NetworkEngine:
             result = solve_cluster(state.bodies, state.histories, mu_up=self.plates.mu_up,
                                    mu_low=self.plates.mu_low, mu_pp=self.mu_pp, box=self.box,
                                    plate_shift=step.shift, numerics=self.numerics,
-                                   guess=_predicted(state.last_step, step, state.gap), **load)
+                                   guess=_predicted(state.last_step, step, state.gap),
+                                   retry=level == 0 or level >= self.cutbacks, **load)
         except ClusterConvergenceError:
             if state.gap is None or level >= self.cutbacks:
                 raise
