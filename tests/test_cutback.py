@@ -37,17 +37,20 @@ SOLVE = network_run.solve_cluster       # the cluster solver, before any planted
 
 @dataclasses.dataclass(frozen=True)
 class Steps(LoadProgram):
-    """An explicit schedule: (force, shift along x) per step."""
+    """An explicit schedule: (force in N, or compression, and the shift along x in m) per
+    step."""
 
     steps: tuple
+    kind: str = "force"
 
     def schedule(self) -> list[LoadStep]:
-        return [LoadStep("force", f, (s, 0.0)) for f, s in self.steps]
+        return [LoadStep(self.kind, f, (s, 0.0)) for f, s in self.steps]
 
 
-def _run(monkeypatch, steps, failing=(), cutbacks=3):
-    """Run the flat ellipsoid through ``steps``; the cluster solver's calls numbered in
-    ``failing`` (from 1) raise. Returns (simulation, dataset, number of calls)."""
+def _run(monkeypatch, steps, failing=(), cutbacks=3, kind="force", particle=FLAT):
+    """Run ``particle`` (the flat ellipsoid, or a layer) through ``steps`` of ``kind``; the
+    cluster solver's calls numbered in ``failing`` (from 1) raise. Returns (simulation,
+    dataset, number of calls)."""
     calls = []
 
     def planted(*args, **kwargs):
@@ -59,8 +62,8 @@ def _run(monkeypatch, steps, failing=(), cutbacks=3):
     monkeypatch.setattr(network_run, "solve_cluster", planted)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(steps)), mu_pp=0.3,
-                            resolution=20, network_tol=1e-5, maps_every=0,
+        sim = tb.Simulation(particle, tb.Plates(0.6, 0.3), Steps(tuple(steps), kind),
+                            mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
                             network_cutbacks=cutbacks)
         ds = sim.run()
     return sim, ds, len(calls)
@@ -83,8 +86,14 @@ def _matrix(rotvec) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
+#: the flat ellipsoid alone in a periodic box of 3 x 3 mm, 3 µm from its +x side: it crosses
+#: the side while it slides (the run wraps it back after every (sub-)step)
+BOX = 3e-3
+EDGE = tb.Layer([tb.PlacedParticle(FLAT, (BOX / 2 - 3e-6, 0.0))], box=(BOX, BOX),
+                periodic=True)
+
 # (planted failing calls, the cut run's schedule, the explicit schedule, the cut step, the
-# explicit steps it is made of)
+# explicit steps it is made of[, the load's kind, the particle])
 CASES = {
     # the second compression step (F/2 -> F) in halves: to 3F/4, then to F
     "compression": ((2,), [(F / 2, 0), (F, 0), (F, S)],
@@ -95,16 +104,27 @@ CASES = {
     # its first half fails again: quarters, then the second half whole
     "deeper": ((3, 4), [(F, 0), (F, S), (F, S), (F, S)],
                [(F, 0), (F, S), (F, S / 4), (F, S / 4), (F, S / 2), (F, S)], 2, (2, 3, 4)),
+    # gap control: the compression 0.004 -> 0.008 in halves, then slid
+    "gap": ((2,), [(0.004, 0), (0.008, 0), (0.008, S)],
+            [(0.004, 0), (0.006, 0), (0.008, 0), (0.008, S)], 1, (1, 2), "compression"),
+    # the second sliding step halved while the particle crosses the periodic box's side
+    "periodic": ((3,), [(F, 0), (F, S), (F, S), (F, S)],
+                 [(F, 0), (F, S), (F, S / 2), (F, S / 2), (F, S)], 2, (2, 3), "force", EDGE),
 }
 
 
-@pytest.fixture(scope="module", params=list(CASES))
+# function scope: mutmut picks the tests that call a function when they run, and a cached
+# fixture would credit every call to the first test (its surviving mutants were false)
+@pytest.fixture(params=list(CASES))
 def cut_and_explicit(request):
-    failing, cut, explicit, k, parts = CASES[request.param]
+    failing, cut, explicit, k, parts, *how = CASES[request.param]
     with pytest.MonkeyPatch.context() as mp:
-        sim, ds, _ = _run(mp, cut, failing)
+        sim, ds, _ = _run(mp, cut, failing, 3, *how)
         assert sim.status == "complete", sim.status
-        ref_sim, ref, _ = _run(mp, explicit)
+        ref_sim, ref, _ = _run(mp, explicit, (), 3, *how)
+    if how and how[-1] is EDGE:                     # it crosses the side in the cut step
+        x = ds.position.isel(particle=0).values[:, 0] + BOX / 2 - 3e-6
+        assert x[k - 1] < BOX / 2 < x[k]
         assert ref_sim.status == "complete", ref_sim.status
     return ds, ref, k, list(parts)
 
@@ -281,7 +301,9 @@ def _failing_after(good):
 def test_halves_split_the_load_from_the_state_when_the_last_step_was_of_another_kind():
     side = SimpleNamespace(side="upper", force=np.array([0.1, 0.0, -2.0]))
     lower = SimpleNamespace(side="lower", force=np.array([0.0, 0.0, 2.0]))
-    histories = {1: SimpleNamespace(solved=side), 2: SimpleNamespace(solved=lower)}
+    pair = SimpleNamespace(force=np.array([0.0, 0.0, -5.0]))      # a pair contact: no side
+    histories = {1: SimpleNamespace(solved=side), 2: SimpleNamespace(solved=lower),
+                 3: SimpleNamespace(solved=pair)}
     state = SimpleNamespace(last_step=SimpleNamespace(kind="compression", value=0.1),
                             histories=histories, gap=0.9e-3)
     first, second = network_run._halves(LoadStep("force", 3.0, (4e-6, -2e-6)), state, 1e-3)
