@@ -4,10 +4,12 @@
 The n × n lattice of ``cluster_lattice.py`` (R = 1 mm times 1 + 5e-4 N(0, 1), touching, in a
 periodic box; ``--seed`` draws the radii) runs through ``thirdbody.Simulation`` as a network run:
 μ = μ_pp = 0.3, 20 cells per size, tol 1e-5, compressed to 0.5 N a sphere in 5 steps, then the
-upper plate slides ``--distance`` along x in ``--steps`` equal steps with the force held. Per
-step it prints the wall time so far, the Newton passes and μ_eff; at the end the run's status.
+upper plate slides ``--distance`` along x in ``--steps`` equal steps with the force held (a step
+that does not converge is cut into halves up to ``--cutbacks`` times). Per step it prints the
+wall time so far, the Newton passes, the sub-steps and μ_eff; at the end the run's status.
 
     .venv/bin/python benchmarks/lattice_shear.py --size 4 --distance 400e-6 --steps 40
+    .venv/bin/python benchmarks/lattice_shear.py --size 10 --distance 4e-3 --steps 100 --cutbacks 4
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--distance", type=float, default=400e-6, help="sliding distance, m")
     parser.add_argument("--steps", type=int, default=40, help="sliding steps")
+    parser.add_argument("--cutbacks", type=int, default=3,
+                        help="halvings of a step that does not converge (network.cutbacks)")
     args = parser.parse_args(argv)
     n = args.size
     bodies, side = lattice(n, 5e-4, 0.0, args.seed)
@@ -38,13 +42,14 @@ def main(argv: list[str] | None = None) -> None:
     program = tb.Slide(force=0.5 * n * n, distance=args.distance, steps=args.steps,
                        compress_steps=5)
     sim = tb.Simulation(layer, tb.Plates(0.3), program, mu_pp=0.3, resolution=20,
-                        network_tol=1e-5)
+                        network_tol=1e-5, network_cutbacks=args.cutbacks)
     start = time.perf_counter()
 
     def progress(record) -> None:
         values = record.values
         print(f"step {record.step:3d}: {time.perf_counter() - start:6.0f} s, "
               f"{values.get('network_iterations')} passes, "
+              f"{values.get('network_substeps')} sub-steps, "
               f"mu_eff {values.get('mu_eff_sliding', np.nan):.6g}", flush=True)
 
     with warnings.catch_warnings():
