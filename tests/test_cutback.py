@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
+import time
 import warnings
 from types import SimpleNamespace
 
@@ -119,7 +120,10 @@ CASES = {
 def cut_and_explicit(request):
     failing, cut, explicit, k, parts, *how = CASES[request.param]
     with pytest.MonkeyPatch.context() as mp:
+        start = time.perf_counter()
         sim, ds, _ = _run(mp, cut, failing, 3, *how)
+        wall = time.perf_counter() - start
+        assert 0 < float(ds.time_total.values[k]) < wall
         assert sim.status == "complete", sim.status
         ref_sim, ref, _ = _run(mp, explicit, (), 3, *how)
     if how and how[-1] is EDGE:                     # it crosses the side in the cut step
@@ -187,6 +191,12 @@ def test_a_cut_step_reports_the_whole_step_summed_over_its_sub_steps(cut_and_exp
     assert float(ds.energy_residual.values[k]) == pytest.approx(residual, rel=1e-9, abs=1e-15)
     # each contact's slip and rigid shift increment summed over the sub-steps
     mine = _rows(ds, k)
+    # how far each contact travelled over both surfaces: from its start to its end, known for
+    # every contact that existed before the step
+    before = _rows(ds, k - 1)
+    for key, row in mine.items():
+        rolled = [float(ds[n].values[row]) for n in ("contact_rolling_i", "contact_rolling_j")]
+        assert all(math.isfinite(r) and r >= 0 for r in rolled) == (key in before), key
     for key, row in mine.items():
         for name in ("contact_slip", "contact_shift_increment"):
             total = sum(ref[name].values[_rows(ref, j)[key]] for j in parts)
@@ -250,7 +260,7 @@ def test_the_solver_without_retries_raises_its_first_attempts_error(monkeypatch)
         assert len(attempts) == count
 
 
-@pytest.mark.parametrize("cutbacks", [1, 2])
+@pytest.mark.parametrize("cutbacks", [1, 2, 3])
 def test_a_step_that_fails_at_every_cut_names_the_depth_and_leaves_the_run_as_it_was(
         monkeypatch, cutbacks):
     # every call from the third fails: the step, its first half, that half's first half...
@@ -296,6 +306,13 @@ def _failing_after(good):
         raise ClusterConvergenceError("cluster equilibrium stalled (planted)")
 
     return planted
+
+
+def test_the_energy_residual_of_a_step_that_neither_moves_nor_slides_is_nan():
+    held = network_run._Energy(work=0.0, stored0=1e-6, stored=1e-6, dissipated=0.0,
+                               gap_change=0.0)
+    assert math.isnan(network_run._balance([held, held], LoadStep("force", F), F)
+                      ["energy_residual"])
 
 
 def test_halves_split_the_load_from_the_state_when_the_last_step_was_of_another_kind():
@@ -353,6 +370,7 @@ def test_a_cut_step_turns_by_its_sub_steps_composed_and_predicts_from_the_last(m
     for i in range(len(state.bodies)):
         expected = _matrix(second.rotation[i]) @ _matrix(first.rotation[i])
         assert _matrix(whole.rotation[i]) == pytest.approx(expected, abs=1e-15)
+    assert whole.bem_solves == first.bem_solves + second.bem_solves
     assert np.linalg.norm(first.rotation) > 1e-4 and np.linalg.norm(second.rotation) > 1e-4
     # these two nearly commute (both tilt about y); two large turns about x, then z, do not
     about_x = dataclasses.replace(first, rotation=np.array([[0.3, 0.0, 0.0]]))
