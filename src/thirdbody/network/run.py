@@ -382,8 +382,9 @@ class NetworkEngine:
         (:func:`_halves`) one after the other instead. The whole step and the deepest
         sub-steps get every attempt of :func:`solve_cluster`; the sub-steps between give up
         after the first (``retry=False``), since halving them again is cheaper than its
-        retries. Returns the solved (sub-)steps in order. Raises ClusterConvergenceError when a (sub-)step at the deepest level fails
-        (``state`` may then be partly advanced: :meth:`step` passes a copy)."""
+        retries. Returns the solved (sub-)steps in order. Raises ClusterConvergenceError when
+        a (sub-)step at the deepest level fails (``state`` may then be partly advanced:
+        :meth:`step` passes a copy)."""
         if step.kind == "force":
             load = {"force": step.value, "gap_start": state.gap}
         else:
