@@ -102,6 +102,9 @@ CASES = {
     # the second sliding step, where it tilts while the lower contact slides, in halves
     "sliding": ((3,), [(F, 0), (F, S), (F, S), (F, S)],
                 [(F, 0), (F, S), (F, S / 2), (F, S / 2), (F, S)], 2, (2, 3)),
+    # the second compression step's second half fails again: a half, then quarters
+    "second": ((2, 4), [(F / 2, 0), (F, 0), (F, S)],
+               [(F / 2, 0), (0.75 * F, 0), (0.875 * F, 0), (F, 0), (F, S)], 1, (1, 2, 3)),
     # its first half fails again: quarters, then the second half whole
     "deeper": ((3, 4), [(F, 0), (F, S), (F, S), (F, S)],
                [(F, 0), (F, S), (F, S / 4), (F, S / 4), (F, S / 2), (F, S)], 2, (2, 3, 4)),
@@ -239,6 +242,20 @@ def test_only_the_whole_step_and_the_deepest_cut_get_the_solvers_retries(monkeyp
         sim.run()
     assert retries == [True, True, True, False, False, True]
 
+    # the second half cut as deep as the first: with cutbacks = 2 its first quarter is the
+    # deepest level (the whole step, its first half converging, its second half, a quarter)
+    retries.clear()
+    monkeypatch.setattr(network_run, "solve_cluster", _planted_at({3} | set(range(5, 99)),
+                                                                  retries))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(CASES["sliding"][1])),
+                            mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
+                            network_cutbacks=2)
+        sim.run()
+    assert sim.status.startswith("failed: step 2 ") and "down to 1/4 of it" in sim.status
+    assert retries == [True, True, True, False, False, True]
+
 
 def test_the_solver_without_retries_raises_its_first_attempts_error(monkeypatch):
     from thirdbody.network import cluster
@@ -293,6 +310,18 @@ def test_a_failed_sub_step_leaves_the_state_as_it_was_before_the_step(monkeypatc
         assert getattr(state, name) is getattr(before, name), name
     monkeypatch.setattr(network_run, "solve_cluster", SOLVE)
     assert engine.step(2, sim.schedule[2], state).values["plate_gap"] == expected
+
+
+def _planted_at(failing, retries):
+    """A solver whose calls numbered in ``failing`` (from 1) raise; each call's ``retry``
+    is appended to ``retries``."""
+    def planted(*args, **kwargs):
+        retries.append(kwargs["retry"])
+        if len(retries) in failing:
+            raise ClusterConvergenceError("cluster equilibrium stalled (planted)")
+        return SOLVE(*args, **kwargs)
+
+    return planted
 
 
 def _failing_after(good):

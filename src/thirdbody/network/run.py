@@ -205,9 +205,8 @@ class _Energy(NamedTuple):
 
 
 class _Part(NamedTuple):
-    """A solved (sub-)step: what it loaded, its equilibrium and its energy terms."""
+    """A solved (sub-)step: its equilibrium and its energy terms."""
 
-    step: LoadStep
     result: ClusterResult
     energy: _Energy
 
@@ -400,7 +399,7 @@ class NetworkEngine:
                 raise
             first, second = _halves(step, state, self.d0)
             return self._parts(first, state, level + 1) + self._parts(second, state, level + 1)
-        part = _Part(step, result, self._energy(step, state, result))
+        part = _Part(result, self._energy(step, state, result))
         self._advance(state, step, result)
         return [part]
 
