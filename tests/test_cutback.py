@@ -225,35 +225,25 @@ def test_without_cutbacks_a_step_that_fails_ends_the_run(monkeypatch):
 
 def test_only_the_whole_step_and_the_deepest_cut_get_the_solvers_retries(monkeypatch):
     # the sub-steps between give up after the first attempt: halving is cheaper than retries
-    retries = []
+    def run(failing, cutbacks):
+        retries = []
+        monkeypatch.setattr(network_run, "solve_cluster", _planted_at(failing, retries))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(CASES["sliding"][1])),
+                                mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
+                                network_cutbacks=cutbacks)
+            sim.run()
+        return sim.status, retries
 
-    def planted(*args, **kwargs):
-        retries.append(kwargs["retry"])
-        if len(retries) >= 3:
-            raise ClusterConvergenceError("cluster equilibrium stalled (planted)")
-        return SOLVE(*args, **kwargs)
-
-    monkeypatch.setattr(network_run, "solve_cluster", planted)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(CASES["sliding"][1])),
-                            mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
-                            network_cutbacks=3)
-        sim.run()
+    # every call from the third fails: the whole step, its first half, its first quarter...
+    status, retries = run(set(range(3, 99)), 3)
+    assert "down to 1/8 of it" in status
     assert retries == [True, True, True, False, False, True]
-
     # the second half cut as deep as the first: with cutbacks = 2 its first quarter is the
     # deepest level (the whole step, its first half converging, its second half, a quarter)
-    retries.clear()
-    monkeypatch.setattr(network_run, "solve_cluster", _planted_at({3} | set(range(5, 99)),
-                                                                  retries))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(CASES["sliding"][1])),
-                            mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
-                            network_cutbacks=2)
-        sim.run()
-    assert sim.status.startswith("failed: step 2 ") and "down to 1/4 of it" in sim.status
+    status, retries = run({3} | set(range(5, 99)), 2)
+    assert status.startswith("failed: step 2 ") and "down to 1/4 of it" in status
     assert retries == [True, True, True, False, False, True]
 
 
