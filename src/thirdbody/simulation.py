@@ -42,6 +42,7 @@ from . import checkpoint
 from .layer import Layer, first_overlap
 from .layer.sharing import LoadSharing
 from .loading import LoadProgram, LoadStep
+from .network.run import CUTBACKS
 from .orientation import key
 from .particle.member import Member
 from .particle.model import Particle, Plates
@@ -156,7 +157,7 @@ class Simulation:
                  maps_every: int = 5, classification: str = "statics",
                  twist_tol: float = 1e-3, workers: int = 1, coupling: bool = False,
                  mu_pp: float | None = None, box: tuple[float, float] | None = None,
-                 network_tol: float = 1e-6, network_cutbacks: int = 3) -> None:
+                 network_tol: float = 1e-6, network_cutbacks: int = CUTBACKS) -> None:
         from ._validate import positive, real
 
         if isinstance(particle, Layer):

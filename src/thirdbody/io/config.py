@@ -86,6 +86,8 @@ from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from ..network.run import CUTBACKS
+
 __all__ = ["Config", "ConfigError", "body_from_results", "load_config"]
 
 
@@ -308,7 +310,7 @@ class Network(_Model):
                                 description="equilibrium tolerance of each step")] = 1e-6
     cutbacks: Annotated[int, Field(strict=True, ge=0, le=8,
                                    description="how many times a load step that does not "
-                                               "converge is cut into halves")] = 3
+                                               "converge is cut into halves")] = CUTBACKS
 
     @model_validator(mode="after")
     def _box_is_periodic(self):

@@ -62,8 +62,8 @@ FIRST_STEP_HINT = ("This is the first step from rest, where particles that the p
                    "the first load decides\")")
 
 #: how many times a failed step is halved by default (down to 1/8 of it; measured: the first
-#: sliding step of 100 touching spheres, 20 um, converges as 8 sub-steps of 2.5 um, and the
-#: later 20 um steps in 2-3 passes; docs/methods/network.md, "Cut steps")
+#: sliding step of 100 touching spheres, 20 um, converges as 2.5 + 2.5 + 5 + 10 um, and the
+#: later 20 um steps in 2-4 passes; docs/methods/network.md, "Cut steps")
 CUTBACKS = 3
 
 __all__ = ["CUTBACKS", "NetworkEngine", "NetworkState", "particle_state"]
@@ -234,13 +234,20 @@ def _halves(step: LoadStep, state: NetworkState, d0: float) -> tuple[LoadStep, L
     if state.last_step is not None and state.last_step.kind == step.kind:
         now = state.last_step.value
     elif step.kind == "force":
-        now = -math.fsum(float(h.solved.force[2]) for h in state.histories.values()
-                         if getattr(h.solved, "side", None) == "upper")
+        now = -float(_upper_force(state.histories)[2])
     else:
         now = (d0 - state.gap) / d0
     half = tuple(0.5 * float(v) for v in step.shift)
     return (LoadStep(step.kind, now + 0.5 * (step.value - now), half),
             LoadStep(step.kind, step.value, half))
+
+
+def _upper_force(histories: dict) -> np.ndarray:
+    """The upper plate's total force on the particles in ``histories``' solved contacts, N
+    (its z component is −F_N)."""
+    upper = [h.solved.force for h in histories.values()
+             if getattr(h.solved, "side", None) == "upper"]
+    return np.array([math.fsum(f[d] for f in upper) for d in range(3)])
 
 
 def _combined(results: list[ClusterResult]) -> ClusterResult:
@@ -437,8 +444,7 @@ class NetworkEngine:
         step (:func:`_contact_energy`). The step's start is the state's histories (the first
         step: no contact, the gap d₀)."""
         start = [h.solved for h in state.histories.values()]
-        upper = [c.force for c in start if getattr(c, "side", None) == "upper"]
-        force0 = np.array([math.fsum(f[d] for f in upper) for d in range(3)])
+        force0 = _upper_force(state.histories)
         gap0 = self.d0 if state.gap is None else state.gap
         move = np.array([*step.shift, result.gap - gap0], dtype=float)
         mean = 0.5 * (force0 + np.asarray(result.plate_force, dtype=float))
