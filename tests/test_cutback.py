@@ -411,3 +411,29 @@ def _recording(solve, results):
         return result
 
     return recorded
+
+
+def test_identical_particles_stay_identical_through_a_cut_step(monkeypatch):
+    # a tie: two identical flat ellipsoids, 3 mm apart in a periodic box of 6 x 6 mm (nothing
+    # touches across it), the second sliding step cut into halves; both move, turn and carry
+    # load alike, each half of F_N, to rounding (their different x put 1e-17 into components
+    # that are zero even in the uncut run; cut, 1.2e-15 of a unit quaternion)
+    pair = tb.Layer([tb.PlacedParticle(FLAT, (x, 0.0)) for x in (-1.5e-3, 1.5e-3)],
+                    box=(6e-3, 6e-3), periodic=True)
+    steps = [(2 * F, 0), (2 * F, S), (2 * F, S)]
+    sim, ds, _ = _run(monkeypatch, steps, (3,), particle=pair)
+    assert sim.status == "complete", sim.status
+    assert int(ds.network_substeps.values[2]) == 2
+    def both(name):
+        return (ds[name].isel(step=2, particle=p).values for p in (0, 1))
+
+    a, b = both("quaternion")
+    assert a == pytest.approx(b, abs=1e-13)
+    a, b = both("translation")
+    assert a == pytest.approx(b, abs=1e-12 * S)
+    for name in ("plate_normal_force", "rotation_angle"):
+        a, b = both(name)
+        assert a == pytest.approx(b, rel=1e-12), name
+    a, b = both("state")
+    assert a == b
+    assert ds.load_share.isel(step=2).values == pytest.approx([0.5, 0.5], abs=1e-12)
