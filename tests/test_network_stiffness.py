@@ -28,8 +28,7 @@ def reference_law(model: ContactModel, ds: np.ndarray, dN: float):
     limit = model.mu * max(model.normal_force + dN, 0.0)
     if model.sliding and float(ds @ model.slip_direction) >= 0:
         d = model.slip_direction
-        return (model.k_across * (P - np.outer(d, d)), model.mu * d,
-                model.mu * model.normal_force * d - T, True)
+        return (model.k_across * (P - np.outer(d, d)), T / model.normal_force, zero, True)
     loading = not model.sliding and (stiffness._TANGENT_BOTH_WAYS or float(ds @ T) > 0)
     k = model.k_loading if loading else model.k_stick
     g = zero
