@@ -778,6 +778,39 @@ def test_a_pressed_square_monolayer_rolls_and_its_pairs_rub(mu_pp):
     assert np.allclose(slid.rotation[:, 1], ds / (2 * R), rtol=0.01, atol=0)
 
 
+def test_a_pressed_hexagonal_monolayer_rubs_at_its_oblique_pairs_too():
+    """12 identical spheres on a periodic hexagonal lattice (rows along x, neighbours at 0°,
+    ±60° and ±120°), pressed 0.1 % of 2R into each other, 0.5 N each, slid 2 × 5 µm along x.
+    Rolling at Δs/(2R), a sphere's surface moves vertically against its neighbour's at
+    2ωR |n_x| at every pair, so all six pairs slide, and the moment balance about y gives
+    F_T per sphere = (μ_pp/2) Σ N |n_x| = (μ_pp/2) N (1 + 1 + 4 · ½) = 2 μ_pp N: twice the
+    square lattice's, with N Hertz's force at the overlap (not read from the run). Measured at
+    20 cells per size: μ_eff 0.0983 against 0.0927 (+6.1 %, the pair force's own error at two
+    cells across its radius, as for the square lattice; −0.7 % at 60 cells, where it converges
+    since the sliding contacts keep their BEM force in the model:
+    ``benchmarks/monolayer_friction.py``). 6 s."""
+    mu_pp, load, ds, close = 0.5, 0.5, 5e-6, 2 * R * (1 - 1e-3)
+    rows, dy = 4, close * math.sqrt(3) / 2
+    bodies = [Body(Sphere(R), MAT, centre=(close * (i + 0.5 + 0.5 * (j % 2)), dy * (j + 0.5), R))
+              for j in range(rows) for i in range(3)]
+    box = (3 * close, rows * dy)
+    numerics = ClusterNumerics(resolution=20, tol=1e-5)
+    slid = solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=mu_pp, force=12 * load, box=box,
+                         numerics=numerics)
+    for _ in range(2):
+        slid = solve_cluster(list(slid.bodies), slid.histories, mu_up=0.5, mu_low=0.5,
+                             mu_pp=mu_pp, force=12 * load, gap_start=slid.gap,
+                             plate_shift=(ds, 0.0), box=box, numerics=numerics)
+        check_balanced(slid)
+    pairs = [c for c in slid.contacts if not isinstance(c.j, str)]
+    assert len(pairs) == 36 and all(c.sliding for c in pairs)
+    assert not any(c.sliding for c in slid.contacts if isinstance(c.j, str))
+    hertz = 4 / 3 * E_STAR_PAIR * math.sqrt(R / 2) * (2 * R * 1e-3) ** 1.5
+    reference = 2 * mu_pp * hertz / load
+    assert slid.plate_force[0] / (12 * load) == pytest.approx(reference, rel=0.08)
+    assert np.allclose(slid.rotation[:, 1], ds / (2 * R), rtol=0.01, atol=0)
+
+
 def test_the_newton_solve_is_the_truncated_pseudo_inverse_with_or_without_the_lu_path():
     """The LU shortcut of the Newton model's solve (``_least_norm``) gives numpy's least-squares
     solution on a well-conditioned matrix, and on a matrix with a mode of next to no stiffness
