@@ -778,7 +778,9 @@ def test_a_pressed_square_monolayer_rolls_and_its_pairs_rub(mu_pp):
     assert np.allclose(slid.rotation[:, 1], ds / (2 * R), rtol=0.01, atol=0)
 
 
-def test_a_pressed_hexagonal_monolayer_rubs_at_its_oblique_pairs_too():
+@pytest.mark.parametrize("cells, tolerance", [(20, 0.08), pytest.param(60, 0.02,
+                                                                 marks=pytest.mark.slow)])
+def test_a_pressed_hexagonal_monolayer_rubs_at_its_oblique_pairs_too(cells, tolerance):
     """12 identical spheres on a periodic hexagonal lattice (rows along x, neighbours at 0°,
     ±60° and ±120°), pressed 0.1 % of 2R into each other, 0.5 N each, slid 2 × 5 µm along x.
     Rolling at Δs/(2R), a sphere's surface moves vertically against its neighbour's at
@@ -788,13 +790,15 @@ def test_a_pressed_hexagonal_monolayer_rubs_at_its_oblique_pairs_too():
     20 cells per size: μ_eff 0.0983 against 0.0927 (+6.1 %, the pair force's own error at two
     cells across its radius, as for the square lattice; −0.7 % at 60 cells, where it converges
     since the sliding contacts keep their BEM force in the model:
-    ``benchmarks/monolayer_friction.py``). 6 s."""
+    ``benchmarks/monolayer_friction.py``). 6 s; at 60 cells (slow, 12 s) the first sliding
+    step stalled at 2.2e-5 > tol 1e-5 while the model put μN along the mean slip of the
+    sliding pairs instead of their own force."""
     mu_pp, load, ds, close = 0.5, 0.5, 5e-6, 2 * R * (1 - 1e-3)
     rows, dy = 4, close * math.sqrt(3) / 2
     bodies = [Body(Sphere(R), MAT, centre=(close * (i + 0.5 + 0.5 * (j % 2)), dy * (j + 0.5), R))
               for j in range(rows) for i in range(3)]
     box = (3 * close, rows * dy)
-    numerics = ClusterNumerics(resolution=20, tol=1e-5)
+    numerics = ClusterNumerics(resolution=cells, tol=1e-5)
     slid = solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=mu_pp, force=12 * load, box=box,
                          numerics=numerics)
     for _ in range(2):
@@ -807,7 +811,7 @@ def test_a_pressed_hexagonal_monolayer_rubs_at_its_oblique_pairs_too():
     assert not any(c.sliding for c in slid.contacts if isinstance(c.j, str))
     hertz = 4 / 3 * E_STAR_PAIR * math.sqrt(R / 2) * (2 * R * 1e-3) ** 1.5
     reference = 2 * mu_pp * hertz / load
-    assert slid.plate_force[0] / (12 * load) == pytest.approx(reference, rel=0.08)
+    assert slid.plate_force[0] / (12 * load) == pytest.approx(reference, rel=tolerance)
     assert np.allclose(slid.rotation[:, 1], ds / (2 * R), rtol=0.01, atol=0)
 
 
