@@ -808,20 +808,21 @@ def test_the_bundled_shear_example_is_a_slide_out_and_back():
 
 @pytest.mark.slow
 def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
-    """The `make shear` example (shear_layer.toml: 8 flat ellipsoids in a periodic box, 80 N),
-    its compression and first two sliding steps of 5 µm: every particle is pressed, every
-    contact sticks (the ellipsoids tilt, rolling without slip: `roll` and `turned`), the layer
-    resists (μ_eff > 0) and opens the gap. Rolling without slip, the plates do no net work
-    but what the contacts store: per step mean(μ_eff) Δs = Δh + ΔE/F_N, from the dataset's
-    own forces and gaps (measured 2.0 % above Δh + ΔE/F_N; tolerance 10 %); the energy
-    residual stays within 1 % of F_N (|Δs| + |Δh|). About 12 s."""
+    """The `make shear` example (shear_layer.toml: 8 tilted potatoes in a periodic box, 40 N),
+    its compression and two sliding steps of 5 µm (a quarter of the example's steps): the
+    plates press all but at most one of the particles, every contact sticks (the potatoes
+    tilt, rolling without slip: `roll` and `turned`), the layer resists (μ_eff > 0) and opens
+    the gap. Rolling without slip, the plates do no net work but what the contacts store: per
+    step mean(μ_eff) Δs = Δh + ΔE/F_N, from the dataset's own forces and gaps (measured 1.8 %
+    above Δh + ΔE/F_N; tolerance 10 %); the energy residual stays within 1 % of
+    F_N (|Δs| + |Δh|) (measured 1.8e-4). Seven of the eight are pressed. About 15 s."""
     from importlib import resources
 
     from thirdbody.io import load_config
 
     body, plates, load, numerics = load_config(
         resources.files("thirdbody") / "examples" / "shear_layer.toml").build()
-    increment = load.path[0][0] / load.steps            # the example's first steps, m
+    increment = load.path[-1][0] / load.steps / 4       # a quarter of the example's steps, m
     short = tb.Slide(force=load.force, points=[(2 * increment, 0.0)], steps=2,
                      compress_steps=load.compress_steps)
     with warnings.catch_warnings():
@@ -831,11 +832,12 @@ def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
     assert sim.status == "complete", sim.status
     n = ds.sizes["particle"]
     slid = slice(load.compress_steps, None)
-    assert (ds.loaded.values[slid] == n).all()
+    assert (ds.loaded.values[slid] >= n - 1).all()
     assert (ds.contact_state.values[ds.contact_step.values >= load.compress_steps]
             == tb.schema.CONTACT_STATES.index("stick")).all()
-    assert (ds.state.values[slid] == tb.schema.STATES.index("roll")).all()
-    assert ds.turned.values[slid].all()
+    pressed = ds.state.values[slid] != tb.schema.STATES.index("unloaded")
+    assert (ds.state.values[slid][pressed] == tb.schema.STATES.index("roll")).all()
+    assert ds.turned.values[slid][pressed].all()
     mu = ds.mu_eff_sliding.values
     assert (mu[slid] > 0).all() and (ds.dilatancy.values[slid] > 0).all()
     k = len(mu) - 1                                     # the second sliding step

@@ -454,7 +454,8 @@ class ModelStack:
         stiffness = np.where(along[:, None, None],
                              self.k_across[:, None, None] * (P - _outer(d, d)), stiffness)
         # the BEM's force, not μN d: the model must equal the residual it linearises at ds = 0
-        per_N = np.where(N > 0, 1.0 / np.where(N > 0, N, 1.0), 0.0)
+        # (a contact without load is frictionless, its law zeroed below)
+        per_N = 1.0 / np.where(N > 0, N, 1.0)
         gain = np.where(along[:, None], T * per_N[:, None], gain)
         offset = np.where(along[:, None], 0.0, offset)
         off = frictionless[:, None]
