@@ -2,7 +2,7 @@
 #               `make test`  (sets up .venv, runs ruff, builds the docs strictly, runs the whole test suite)
 # More:         `make fig2` `make fig4` `make fig5` (the paper's other figures), `make hertz`,
 #               `make layer` (30 potatoes between the plates), `make layer-hertz`,
-#               `make shear` (a periodic layer of 8 ellipsoids compressed, then slid 1.5 mm),
+#               `make shear` (a periodic layer of 8 potatoes compressed, then slid 1.5 mm),
 #               `make sweep` (a 20-case sweep on a local dask cluster),
 #               `make bench`, `make bench-tangential`, `make bench-simulation`, `make bench-sweep`,
 #               `make bench-layer`,
