@@ -1889,10 +1889,8 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
             ev, R, plate, merit = trial, R_trial, plate_trial, merit_trial
             model = None
             polish = False
-        elif polish and done and not _strays(problem, ev, carried):
-            break           # the guess is within tol and its Newton step did not improve it
         elif polish and done:
-            polish = False  # the strays are released at the next pass
+            break           # the guess is within tol and its Newton step did not improve it
         else:
             radius *= 0.25
             if _SKIP_REPEATS and not learnt and not clipped:
