@@ -201,6 +201,26 @@ def test_a_free_particle_is_not_moved_by_the_guess(pushed):
         assert np.abs(guessed.translation - plain.translation).max() < 1e-12
 
 
+def test_the_strays_are_the_guessed_particles_that_no_contact_touches():
+    """Which particles a converged step releases: those the guess moved (``carried``) that
+    neither a plate contact nor either side of a pair contact touches. Five particles: 0 on
+    the lower plate, 1 and 2 a pair listed with 2 as its first role (the key's first index is
+    1), 3 guessed and touching nothing, 4 touching nothing but not guessed."""
+    from types import SimpleNamespace as NS
+
+    from thirdbody.network import cluster
+    from thirdbody.network.plate import PlateContact
+
+    plate = NS(key=(0, "lower"), roles=(0, "lower"), contact=PlateContact.__new__(PlateContact))
+    pair = NS(key=(1, 2, (0, 0)), roles=(2, 1), contact=object())
+    ev = NS(contacts=[plate, pair])
+    problem = NS(n=5)
+    carried = np.array([True, True, True, True, False])
+    assert cluster._strays(problem, ev, carried) == [3]
+    assert cluster._strays(problem, ev, None) == []
+    assert cluster._strays(problem, ev, np.zeros(5, dtype=bool)) == []
+
+
 @pytest.mark.parametrize("depth", [1e-7, 0.5e-6, 1e-6])
 def test_a_sphere_pressed_into_the_lower_plate_with_nothing_above_lifts_off(depth):
     """A sphere (0.8 R) ``depth`` m deep in the lower plate, its top far below the upper one,
