@@ -236,6 +236,46 @@ def test_sweep_on_two_workers_equals_the_cases_run_one_by_one(swept, one_by_one)
         assert case.case_id in ds.attrs["sweep_case"]
 
 
+# the flat ellipsoid of the bundled shear example, slid 5 µm and back in 2.5 µm steps, at three
+# μ_low
+SLIDING_SWEEP = """
+base = "shear_ellipsoid"
+
+[axes]
+plates.mu_low = [0.3, 0.4, 0.5]
+
+[set]
+"load.points" = [[5.0e-6, 0.0], [0.0, 0.0]]
+"load.steps" = 2
+"numerics.resolution" = 20.0
+"""
+
+
+@pytest.mark.slow
+def test_a_sweep_of_sliding_cases_on_two_workers_equals_them_run_one_by_one(tmp_path, client):
+    """Sliding runs (the network engine, a contact table, μ_eff, the energy balance) are as
+    deterministic across worker processes as the particle runs: each case's file is the one
+    `thirdbody run` writes for its configuration."""
+    sweep = load_sweep(write_sweep(tmp_path / "in", sweep=SLIDING_SWEEP, base=""))
+    report = run_sweep(sweep, tmp_path / "out", client=client)
+    assert report.computed == 3 and not report.failures
+    # one worker runs two cases one after the other: nothing may carry over between runs
+    assert len({r["worker"] for r in report.records.values()}) == 2
+    for case in report.cases:
+        (tmp_path / "case.toml").write_text(case.config.to_toml())
+        alone = tmp_path / f"alone_{case.case_id}"
+        result = runner.invoke(app, ["run", str(tmp_path / "case.toml"), "-o", str(alone),
+                                     "--no-plots"])
+        assert result.exit_code == 0, result.output
+        expected = open_results(alone / "results.nc")
+        ds = open_results(tmp_path / "out" / "cases" / case.filename)
+        assert ds.sizes["contact"] > 0 and np.isfinite(ds.mu_eff_sliding.values[2:]).all()
+        xr.testing.assert_identical(without_times(ds).drop_attrs(),
+                                    without_times(expected).drop_attrs())
+        assert ds.attrs["config"] == expected.attrs["config"]
+    assert np.isfinite(report.summary["steady_mu_eff"].values).all()
+
+
 @pytest.mark.slow
 def test_the_summary_shows_the_rigid_turning_criterion(swept, one_by_one):
     """μ = 0.3 < ξ(θ0) for both tilts: the ellipsoid rotates to the rigid equilibrium angle;
