@@ -265,6 +265,45 @@ def test_a_sliding_run_resumed_mid_slide_ends_as_the_uninterrupted_one(sphere_ru
         assert np.array_equal(again[name].values, sphere_run[name].values, equal_nan=True), name
 
 
+# A periodic row of four touching spheres (the network_row example's radii 1 and 0.7 mm
+# alternating, each with its own modulus so that no two are alike), pressed by 4 N in two
+# steps, then slid 20 µm along x in two steps. The large spheres roll and rub the small ones,
+# which the plates do not reach: they are pressed down through particle contacts, then let go.
+ROW_X = (-2.50998e-3, -0.83666e-3, 0.83666e-3, 2.50998e-3)      # m
+ROW_R = (1e-3, 0.7e-3, 1e-3, 0.7e-3)                           # m
+
+
+def _sliding_row(order):
+    layer = tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(ROW_R[i]),
+                                                    tb.Material(1e9 * (1 + 0.5 * i), 0.3)),
+                                        (ROW_X[i], 0.0)) for i in order],
+                     box=(4 * 1.67332e-3, 4e-3), periodic=True)
+    return run(layer, tb.Plates(0.6, 0.4),
+               tb.Slide(force=4.0, distance=4 * STEP / 2, steps=2, compress_steps=2))
+
+
+def test_permuting_the_particles_of_a_sliding_row_permutes_its_results_bit_for_bit():
+    ds = _sliding_row([0, 1, 2, 3])
+    other = _sliding_row([2, 3, 1, 0])
+    back = [3, 2, 0, 1]                             # ds's particle k is other's back[k]
+    assert (ds.normal_force.values[2:, [1, 3]] < ds.normal_force.values[2:, [0, 2]]).all()
+    assert ds.particle_contacts.values.max() > 0    # the row touches while it slides
+    for name in ("normal_force", "centroid_height", "quaternion", "translation", "rotation",
+                 "state", "plate_normal_force"):
+        a = ds[name].transpose("step", "particle", ...).values
+        b = other[name].transpose("step", "particle", ...).values[:, back]
+        assert np.array_equal(a, b), name
+    for name in ("plate_gap", *SLIDING, *ENERGY[:4], "network_iterations", "particle_contacts"):
+        assert np.array_equal(ds[name].values, other[name].values, equal_nan=True), name
+    # the contact table lists the same contacts (in another order, each pair maybe reversed)
+    for name in ("contact_normal_force", "contact_dissipation", "contact_elastic_energy",
+                 "contact_total_area"):
+        for k in range(ds.sizes["step"]):
+            a = ds[name].values[ds.contact_step.values == k]
+            b = other[name].values[other.contact_step.values == k]
+            assert np.array_equal(np.sort(a), np.sort(b)), (name, k)
+
+
 # --- e: validation: a sphere rolls -------------------------------------------------------------
 def hertz_gap(force: float) -> float:
     """A sphere R pressed by ``force`` between two rigid plates: h = 2(R − δ), Hertz's approach
