@@ -343,6 +343,7 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
             figures["contact_network"] = contact_network(ds)
         if slides(ds):
             figures["shear"] = shear_curve(ds)
+            figures["particle_rotations"] = particle_rotations(ds)
         return _save_figures(plt, figures, out, formats)
     whole = ds
     ds = _one(ds)
@@ -351,6 +352,7 @@ def save_all(ds, out: str | Path, formats: tuple[str, ...] = ("png", "pdf"),
         figures["contact_maps"] = contact_maps(ds, map_steps)
     if slides(whole):
         figures["shear"] = shear_curve(whole)
+        figures["particle_rotations"] = particle_rotations(whole)
     return _save_figures(plt, figures, out, formats)
 
 
@@ -996,6 +998,86 @@ def shear_curve(ds):
                            gid="reversal")
     title = _layer_title(ds) if ds.sizes.get("particle", 1) > 1 else _title(_one(ds))
     fig.suptitle(f"shear: {title}", fontsize=10)
+    return fig
+
+
+def rolling_turns(ds) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each particle's turn since the end of the compression about the rolling axis
+    e_r = ẑ × e (e the direction of the plate's first sliding increment), from the
+    orientations (``quaternion``): the rotation R_k R_c⁻¹'s vector projected on e_r, rad,
+    positive in the sense a particle rolling without slip under the sliding plate turns. Returns
+    (the plate's displacement along e since the compression, m, over the steps from the end of
+    the compression; the turns, (steps, particles), rad; the gap at the end of the compression,
+    m). A particle rolling without slip turns by that displacement over the gap."""
+    from scipy.spatial.transform import Rotation
+
+    distance = ds.sliding_distance.values
+    first = int(np.flatnonzero(distance > 0)[0])
+    start = max(first - 1, 0)
+    shift = ds.plate_shift.transpose("step", "component").values
+    e = shift[first] - shift[start]
+    e = e / np.linalg.norm(e)
+    axis = np.array([-e[1], e[0], 0.0])                  # ẑ × e
+    quats = ds.quaternion.transpose("step", "particle", "quaternion_component").values
+    turns = np.empty((len(distance) - start, quats.shape[1]))
+    for i in range(quats.shape[1]):
+        rel = Rotation.from_quat(quats[start:, i]) * Rotation.from_quat(quats[start, i]).inv()
+        turns[:, i] = rel.as_rotvec() @ axis
+    along = (shift[start:] - shift[start]) @ e
+    return along, turns, float(ds.plate_gap.values[start])
+
+
+def particle_rotations(ds):
+    """How the particles accommodate the sliding: each particle's turn about the rolling axis
+    since the end of the compression (degrees, :func:`rolling_turns`) against the plate's
+    displacement along its first sliding direction (µm), dots coloured by the particle's state
+    in the step; the dashed line is rolling without slip between the plates, a turn of s/h_c
+    (h_c the gap at the end of the compression). A particle on it rolls; one that stays near 0
+    slides (or sticks to both plates, which then cannot slide); between, it rolls and slips.
+    The particles that turned most are named (at most eight)."""
+    plt = _plt()
+    along, turns, gap = rolling_turns(ds)
+    start = ds.sizes["step"] - len(along)
+    state = ds.state.transpose("step", "particle").values[start:]
+    names = _state_names(ds)
+    degrees = np.degrees(turns)
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), constrained_layout=True)
+    s = along * 1e6
+    span = np.array([min(s.min(), 0.0), max(s.max(), 0.0)])
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.plot(span, np.degrees(span * 1e-6 / gap), "--", color="k", lw=1.0, zorder=1,
+            label=rf"rolling without slip: $s/h_c$ ($h_c$ = {gap * 1e3:.3g} mm)",
+            gid="rolling")
+    order = np.argsort(-np.abs(degrees).max(axis=0), kind="stable")
+    named = [int(i) for i in order[:_NAMED]]
+    palette = plt.get_cmap("Dark2").colors
+    for i in range(degrees.shape[1]):
+        if i in named:
+            colour = palette[named.index(i) % len(palette)]
+            ax.plot(s, degrees[:, i], lw=1.2, color=colour, zorder=2, label=f"particle {i}",
+                    gid=f"particle {i}")
+        else:
+            ax.plot(s, degrees[:, i], lw=0.8, color="0.6", zorder=2, gid=f"particle {i}")
+    loaded = state != names.index("unloaded")
+    for i in range(degrees.shape[1]):
+        ax.scatter(s[loaded[:, i]], degrees[loaded[:, i], i], s=10, zorder=3, edgecolors="k",
+                   linewidths=0.3,
+                   c=[_state_colour(names[code]) for code in state[loaded[:, i], i]])
+    from matplotlib.lines import Line2D
+
+    handles = ax.get_legend_handles_labels()[0]
+    if degrees.shape[1] > len(named):
+        handles.append(Line2D([], [], lw=0.8, color="0.6",
+                              label=f"+ {degrees.shape[1] - len(named)} others"))
+    shown = sorted({int(code) for code in state[loaded]})
+    handles += [Line2D([], [], ls="", marker="o", ms=4, color=_state_colour(names[code]),
+                       markeredgecolor="k", markeredgewidth=0.4,
+                       label=names[code].replace("_", " ")) for code in shown]
+    fig.legend(handles=handles, fontsize=7, loc="outside right upper")
+    ax.set_xlabel("plate displacement along the sliding since the compression (µm)")
+    ax.set_ylabel("turn about the rolling axis (degree)")
+    title = _layer_title(ds) if ds.sizes.get("particle", 1) > 1 else _title(_one(ds))
+    fig.suptitle(f"particle rotations: {title}", fontsize=9)
     return fig
 
 
