@@ -311,6 +311,8 @@ class NetworkEngine:
         self.layer, self.plates, self.mu_pp = layer, plates, mu_pp
         self.cutbacks = int(cutbacks)
         self.d0 = d0
+        # each particle's height at rest: the gap at which the upper plate first touches it
+        self.tops = [float(p.particle.shape.height(p.particle.orientation)) for p in layer]
         self.box = None if box is None else (float(box[0]), float(box[1]))
         # the cluster's coordinates: the layer's, moved so that a box starts at the origin
         self.origin = np.zeros(3) if self.box is None else np.array(
@@ -448,20 +450,26 @@ class NetworkEngine:
         step (:func:`_contact_energy`). The step's start is the state's histories (the first
         step: no contact, the gap d₀).
 
-        The first step starts at first touch, from zero force: there the trapezoid's ½ F Δh
-        is replaced by Hertz's ⅖ F Δh, the work of a force that grows as the approach to the
-        power 3/2 (every smooth, non-conforming contact from first touch, Hertz 1882). It is
-        exact for one particle (the trapezoid left a residual of 0.1 of F_N Δh there); where
-        other particles are reached only during the step, their forces grow faster than that
-        and ⅖ still overestimates the work, by less than ½ does."""
+        The first step starts from rest, before any force: there the trapezoid's ½ F Δh is
+        replaced by Hertz's ⅖ f (t − h) for each particle's upper contact, f its force at the
+        end and t − h the plate's travel from where that particle first touched it (t its
+        height at rest, h the gap at the end): the work of a force that grows as the approach
+        to the power 3/2 (every smooth, non-conforming contact from first touch, Hertz 1882).
+        It is exact for one particle (the trapezoid left a residual of 0.1 of F_N Δh there)
+        and for particles that share the load without pressing each other."""
         start = [h.solved for h in state.histories.values()]
         force0 = _upper_force(state.histories)
         gap0 = self.d0 if state.gap is None else state.gap
         move = np.array([*step.shift, result.gap - gap0], dtype=float)
-        weight = _FROM_TOUCH if state.gap is None else 0.5
-        mean = weight * (force0 + np.asarray(result.plate_force, dtype=float))
+        if state.gap is None:
+            work = math.fsum(_FROM_TOUCH * float(h.solved.force[2]) * (result.gap - self.tops[i])
+                             for (i, side, *_), h in result.histories.items()
+                             if side == "upper")
+        else:
+            mean = 0.5 * (force0 + np.asarray(result.plate_force, dtype=float))
+            work = math.fsum(mean * move)
         ends = [_contact_energy(h.solved) for h in result.histories.values()]
-        return _Energy(work=math.fsum(mean * move),
+        return _Energy(work=work,
                        stored0=math.fsum(_contact_energy(c)[0] for c in start),
                        stored=math.fsum(e[0] for e in ends),
                        dissipated=math.fsum(e[1] for e in ends), gap_change=float(move[2]))
