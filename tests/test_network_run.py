@@ -359,6 +359,12 @@ def test_a_network_table_makes_a_network_run():
     # the TOML written back reads the same
     again = parse_config(__import__("tomllib").loads(cfg.to_toml()))
     assert again.network == cfg.network
+    # an energy tolerance reaches the engine and the recorded inputs; none is the default
+    assert sim.network.energy_tol is None and "network_energy_tol" not in sim.inputs()
+    tight = parse_config({**_BASE, "network": {"mu_pp": 0.3, "energy_tol": 0.01}})
+    sim = tb.Simulation(*tight.build()[:3], **tight.build()[3])
+    assert sim.network.energy_tol == 0.01 and sim.inputs()["network_energy_tol"] == 0.01
+    assert parse_config(__import__("tomllib").loads(tight.to_toml())).network == tight.network
 
 
 @pytest.mark.parametrize("network, match", [
@@ -366,6 +372,8 @@ def test_a_network_table_makes_a_network_run():
     ({"mu_pp": 0.3, "box": [1e-3, 1e-3]}, r"periodic = true"),
     ({"mu_pp": 0.3, "periodic": True}, r"network\.box"),
     ({"mu_pp": 0.3, "tol": 0.5}, r"network\.tol"),
+    ({"mu_pp": 0.3, "energy_tol": 0.0}, r"network\.energy_tol"),
+    ({"mu_pp": 0.3, "energy_tol": 1.5}, r"network\.energy_tol"),
     ({"mu_pp": 0.3, "spam": 1}, r"network\.spam"),
 ])
 def test_a_bad_network_table_names_the_key(network, match):

@@ -41,11 +41,11 @@ FLAT_STEP = 5e-6                    # its sliding increment, m
 MU_UP, MU_LOW = 0.6, 0.3            # the flat ellipsoid's plates
 
 
-def run(particle, plates, load, resolution=20.0):
+def run(particle, plates, load, resolution=20.0, **kw):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HalfSpaceWarning)
         sim = tb.Simulation(particle, plates, load, mu_pp=0.3, resolution=resolution,
-                            network_tol=1e-5, maps_every=0)
+                            network_tol=1e-5, maps_every=0, **kw)
         ds = sim.run()
     assert sim.status == "complete", sim.status
     return ds
@@ -620,6 +620,31 @@ def test_a_compression_from_first_touch_closes_its_balance_as_the_grid_refines(s
             0.4 * F * (2 * shape.size * (1 if isinstance(shape, Sphere) else C / A)
                        - ds.plate_gap.values[0]), rel=1e-6)
     assert abs(residuals[1]) < abs(residuals[0])
+
+
+def test_an_energy_tolerance_cuts_the_steps_whose_balance_does_not_close(flat_run):
+    """The flat ellipsoid's second sliding step goes from stick to sliding at the lower plate
+    and leaves a residual of 2.1 % of F_N Δs (flat_run). With network_energy_tol = 0.01 that
+    step is solved again in halves, and every step closes within 1 %; the steps that closed
+    are solved as before, bit for bit, and the end is the same sliding (μ_eff = μ_low)."""
+    residual = flat_run.energy_residual.values
+    over = np.flatnonzero(np.abs(residual[1:]) > 0.01) + 1
+    assert over.size >= 1                               # the transition step
+    ds = run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_UP, MU_LOW),
+             tb.Slide(force=F, distance=4 * FLAT_STEP, steps=4, compress_steps=1),
+             network_energy_tol=0.01)
+    assert np.abs(ds.energy_residual.values).max() <= 0.01
+    cut = ds.network_substeps.values > 1
+    assert cut[over].all()
+    first = int(over[0])
+    for name in ("plate_gap", "mu_eff_sliding", "energy_residual", "quaternion"):
+        assert np.array_equal(ds[name].values[:first], flat_run[name].values[:first],
+                              equal_nan=True), name
+    assert ds.mu_eff_sliding.values[-1] == pytest.approx(MU_LOW, rel=1e-4)
+    assert ds.attrs["inputs"] != flat_run.attrs["inputs"]       # the tolerance is recorded
+    with pytest.raises(ValueError, match=r"network_energy_tol \(network.energy_tol\)"):
+        tb.Simulation(tb.Particle(Sphere(R), MAT), tb.Plates(0.5), tb.LinearRamp(stop=1.0),
+                      mu_pp=0.3, network_energy_tol=-0.01)
 
 
 def test_a_first_step_that_reaches_a_second_particle_counts_each_from_its_own_touch():

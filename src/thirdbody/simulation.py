@@ -146,6 +146,12 @@ class Simulation:
         cut into halves (each half that fails into halves again), 0–8; the step's record is its
         end (``network_substeps`` says how many sub-steps it took). 0: a step that fails ends
         the run at once.
+    network_energy_tol : float, optional
+        With ``mu_pp``: a load step after the first whose energy residual
+        (``energy_residual``: the plate's work less the change of elastic energy and the
+        dissipation, over F_N (|Δs| + |Δh|)) exceeds it in magnitude is cut into halves as
+        well, within ``network_cutbacks``, so that each step's balance closes within it or the
+        step is at its deepest cut (e.g. 0.01). Default None: never.
     """
 
     #: fewest cells across the contact at the largest load that :meth:`preflight` accepts
@@ -157,7 +163,8 @@ class Simulation:
                  maps_every: int = 5, classification: str = "statics",
                  twist_tol: float = 1e-3, workers: int = 1, coupling: bool = False,
                  mu_pp: float | None = None, box: tuple[float, float] | None = None,
-                 network_tol: float = 1e-6, network_cutbacks: int = CUTBACKS) -> None:
+                 network_tol: float = 1e-6, network_cutbacks: int = CUTBACKS,
+                 network_energy_tol: float | None = None) -> None:
         from ._validate import positive, real
 
         if isinstance(particle, Layer):
@@ -249,12 +256,14 @@ class Simulation:
                 raise ValueError(f"network_cutbacks (network.cutbacks) must be an integer in "
                                  f"[0, 8], got {network_cutbacks!r}")
             self.network_cutbacks = int(network_cutbacks)
+            self.network_energy_tol = None if network_energy_tol is None else positive(
+                "network_energy_tol (network.energy_tol)", network_energy_tol)
             if coupling:
                 raise ValueError("coupling (numerics.coupling) is not available with mu_pp "
                                  "(network.mu_pp): the network's contacts are uncoupled")
             self.network = NetworkEngine(self.layer, plates, self.mu_pp, box, cells,
                                          self.network_tol, self.tol, self.d0,
-                                         self.network_cutbacks)
+                                         self.network_cutbacks, self.network_energy_tol)
         self.records: list = []
         self.maps: list = []
         self.status = "not run"
@@ -298,7 +307,9 @@ class Simulation:
             "twist_tol": self.twist_tol, "d0": self.d0,
             **({"coupling": 1} if self.coupling else {}),
             **({"mu_pp": self.mu_pp, "network_tol": self.network_tol,
-                "network_cutbacks": self.network_cutbacks} if self.network else {}),
+                "network_cutbacks": self.network_cutbacks,
+                **({"network_energy_tol": self.network_energy_tol}
+                   if self.network_energy_tol is not None else {})} if self.network else {}),
             **({"box": list(self.box)} if self.box is not None else {}),
         }
         if self.single:

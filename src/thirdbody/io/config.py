@@ -311,6 +311,10 @@ class Network(_Model):
     cutbacks: Annotated[int, Field(strict=True, ge=0, le=8,
                                    description="how many times a load step that does not "
                                                "converge is cut into halves")] = CUTBACKS
+    energy_tol: Annotated[float | None, Field(
+        strict=True, gt=0, lt=1,
+        description="a load step whose energy residual exceeds this is cut into halves "
+                    "too (within cutbacks); default: never")] = None
 
     @model_validator(mode="after")
     def _box_is_periodic(self):
@@ -446,7 +450,8 @@ class Config(_Model):
             if net.periodic and box is None:
                 box = self.layer.box            # required by _one_body otherwise
             numerics.update(mu_pp=net.mu_pp, box=box if net.periodic else None,
-                            network_tol=net.tol, network_cutbacks=net.cutbacks)
+                            network_tol=net.tol, network_cutbacks=net.cutbacks,
+                            network_energy_tol=net.energy_tol)
         return body, plates, load, numerics
 
     def to_toml(self) -> str:

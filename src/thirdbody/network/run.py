@@ -304,12 +304,17 @@ class NetworkEngine:
     cutbacks : int
         How many times a step after the first that does not converge is halved (0: never;
         :meth:`step`).
+    energy_tol : float, optional
+        A step after the first whose energy residual (:func:`_balance`) exceeds it in
+        magnitude is solved again in halves too, within the same ``cutbacks`` (None: never).
     """
 
     def __init__(self, layer, plates, mu_pp, box, cells: list[float], tol: float,
-                 solver_tol: float, d0: float, cutbacks: int = CUTBACKS) -> None:
+                 solver_tol: float, d0: float, cutbacks: int = CUTBACKS,
+                 energy_tol: float | None = None) -> None:
         self.layer, self.plates, self.mu_pp = layer, plates, mu_pp
         self.cutbacks = int(cutbacks)
+        self.energy_tol = energy_tol
         self.d0 = d0
         # each particle's height at rest: the gap at which the upper plate first touches it
         self.tops = [float(p.particle.shape.height(p.particle.orientation)) for p in layer]
@@ -390,13 +395,13 @@ class NetworkEngine:
 
     def _parts(self, step: LoadStep, state: NetworkState, level: int) -> list[_Part]:
         """Solve ``step`` from ``state`` and advance ``state`` to its end (:meth:`_advance`);
-        if it does not converge and ``level`` < ``cutbacks``, solve its two halves
-        (:func:`_halves`) one after the other instead. The whole step and the deepest
-        sub-steps get every attempt of :func:`solve_cluster`; the sub-steps between give up
-        after the first (``retry=False``), since halving them again is cheaper than its
-        retries. Returns the solved (sub-)steps in order. Raises ClusterConvergenceError when
-        a (sub-)step at the deepest level fails (``state`` may then be partly advanced:
-        :meth:`step` passes a copy)."""
+        if it does not converge, or its energy residual exceeds ``energy_tol``, and ``level``
+        < ``cutbacks``, solve its two halves (:func:`_halves`) one after the other instead.
+        The whole step and the deepest sub-steps get every attempt of :func:`solve_cluster`;
+        the sub-steps between give up after the first (``retry=False``), since halving them
+        again is cheaper than its retries. Returns the solved (sub-)steps in order. Raises
+        ClusterConvergenceError when a (sub-)step at the deepest level fails (``state`` may
+        then be partly advanced: :meth:`step` passes a copy)."""
         if step.kind == "force":
             load = {"force": step.value, "gap_start": state.gap}
         else:
@@ -413,6 +418,13 @@ class NetworkEngine:
             first, second = _halves(step, state, self.d0)
             return self._parts(first, state, level + 1) + self._parts(second, state, level + 1)
         part = _Part(result, self._energy(step, state, result))
+        if (self.energy_tol is not None and state.gap is not None and level < self.cutbacks
+                and abs(_balance([part.energy], step, result.normal_force)["energy_residual"])
+                > self.energy_tol):
+            # converged, but its forces did not change linearly over it (a contact went from
+            # stick to slide, or a particle was reached, within the step): halves
+            first, second = _halves(step, state, self.d0)
+            return self._parts(first, state, level + 1) + self._parts(second, state, level + 1)
         self._advance(state, step, result)
         return [part]
 
