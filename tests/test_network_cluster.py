@@ -705,6 +705,113 @@ def test_a_periodic_array_of_identical_spheres_shares_the_load_bit_for_bit():
     assert array.gap == pytest.approx(2 * R - 2 * delta, abs=0.05 * delta)
 
 
+def test_wrap_brings_particles_from_other_images_back_and_keeps_every_contact():
+    """The groove of three spheres with each particle placed in another image of a
+    rectangular periodic box (L_x = 10R, L_y = 7R; A one box to the right and two down, B two
+    to the left and three up, C one down): the solve finds the groove through the images. After
+    :func:`wrap` every centre is its own modulo the box (np.mod, by hand), each pair's
+    separation c_j + image L − c_i is what it was, each history's stored bodies are the
+    wrapped particles (a plate contact's its particle, a pair's a and b moved by a's jump, so
+    b − a is kept), and the same load solved again from there starts in equilibrium: one pass,
+    nothing moves, the same contact forces."""
+    Lx, Ly = 10 * R, 7 * R
+    box = np.array([Lx, Ly])
+    s = 1.2 * R
+    zc = R + math.sqrt(4 * R * R - s * s) - 8e-6
+    jumps = [(1, -2), (-2, 3), (0, -1)]                      # A, B, C: whole boxes
+    base = [(3 * R, 2 * R, R), (3 * R + 2 * s, 2 * R, R), (3 * R + s, 2 * R, zc)]
+    bodies = [Body(Sphere(R), MAT, centre=(x + m[0] * Lx, y + m[1] * Ly, z))
+              for (x, y, z), m in zip(base, jumps, strict=True)]
+    result = solve_cluster(bodies, mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F,
+                           numerics=COARSE, box=(Lx, Ly))
+    pairs = [c for c in result.contacts if not isinstance(c.j, str)]
+    assert len(pairs) == 2 and all(c.normal_force > 0.3 * F for c in pairs)
+    moved, histories = wrap(result.bodies, result.histories, (Lx, Ly))
+    before = np.array([b.centre for b in result.bodies])
+    after = np.array([b.centre for b in moved])
+    assert after[:, :2] == pytest.approx(np.mod(before[:, :2], box), abs=1e-15)
+    assert after[:, 2] == pytest.approx(before[:, 2], abs=0)
+    assert (after[:, :2] >= 0).all() and (after[:, :2] < box).all()
+
+    def separation(centres, key):
+        i, j, image = key
+        return centres[j, :2] + np.array(image) * box - centres[i, :2]
+
+    old_pairs = sorted(k for k in result.histories if len(k) == 3)
+    new_pairs = sorted(k for k in histories if len(k) == 3)
+    assert [k[:2] for k in old_pairs] == [k[:2] for k in new_pairs]
+    for old, new in zip(old_pairs, new_pairs, strict=True):
+        assert separation(after, new) == pytest.approx(separation(before, old), abs=1e-15)
+        was, now = result.histories[old].solved, histories[new].solved
+        a = histories[new].roles[0]
+        assert now.a.centre == pytest.approx(after[a], abs=1e-15)
+        assert now.b.centre - now.a.centre == pytest.approx(was.b.centre - was.a.centre,
+                                                             abs=1e-15)
+        assert now.pressure_centroid - now.a.centre == pytest.approx(
+            was.pressure_centroid - was.a.centre, abs=1e-15)
+        assert histories[new].roles == result.histories[old].roles
+    for key, hist in histories.items():
+        if len(key) == 2:
+            assert hist.solved.body.centre == pytest.approx(after[key[0]], abs=1e-15)
+            assert hist.roles == result.histories[key].roles
+    again = solve_cluster(moved, histories, mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F,
+                          gap_start=result.gap, numerics=COARSE, box=(Lx, Ly))
+    assert again.iterations == 1
+    assert not again.translation.any() and not again.rotation.any()
+    for c in again.contacts:
+        assert c.normal_force == pytest.approx(
+            next(d.normal_force for d in result.contacts if d.i == c.i and d.j == c.j),
+            rel=1e-5)
+
+
+@pytest.mark.parametrize("start_gap, history", [(-1e-6, False), (-1e-6, True), (2e-6, False)])
+@pytest.mark.parametrize("roles", [(0, 1), (1, 0)])
+def test_a_pair_s_step_kinematics_are_its_bodies_rigid_motions_by_the_midpoint_rule(
+        roles, start_gap, history):
+    """_Problem._pair_kinematics of two spheres side by side that each move and turn in the
+    step (a: 3 µm along x and (2, 0, 1) mrad; b: 2 µm along y and (−1, 0.5, 0) mrad), against
+    the rigid motions computed here: each body's turn is its rotation vector since the start;
+    its lever at the middle of the step is ½((o₀ − c₀) + (o₁ − c₁)), o₁ the contact point (the
+    closest points' midpoint) at the end and o₀ where it was at the start: the history's
+    origin if the contact has one, else the closest points' midpoint at the start (pressed
+    1 µm together), or o₁ when they were apart then (2 µm); the shift increment is b's motion
+    there less a's, Δc + Δφ × lever. Both orders of the pair's roles."""
+    from types import SimpleNamespace
+
+    from thirdbody.network import cluster
+    from thirdbody.network.narrow import closest_approach
+
+    start = [sphere(0.0, R), sphere(2 * R + start_gap, R)]
+    problem = cluster._Problem(start, {}, 0.3, 0.3, cluster._mu_function(0.3), None, F,
+                               None, (0.0, 0.0), None, COARSE)
+    move = {0: (np.array([3e-6, 0.0, 0.0]), np.array([2e-3, 0.0, 1e-3])),
+            1: (np.array([0.0, 2e-6, 0.0]), np.array([-1e-3, 5e-4, 0.0]))}
+    centres = [start[k].centre + move[k][0] for k in (0, 1)]
+    rotations = [Rotation.from_rotvec(move[k][1]) for k in (0, 1)]
+    a, b = roles
+    A = Body(Sphere(R), MAT, rotation=rotations[a], centre=centres[a])
+    B = Body(Sphere(R), MAT, rotation=rotations[b], centre=centres[b])
+    closest = closest_approach(A, B)
+    o1 = closest.midpoint
+    old = SimpleNamespace(origin=np.array([R, 3e-6, 1.1 * R])) if history else None
+    if history:
+        o0 = old.origin
+    elif start_gap < 0:
+        o0 = np.array([R + start_gap / 2, 0.0, R])      # the start's contact point
+    else:
+        o0 = o1
+    shift, mid_a, mid_b, turn_a, turn_b = problem._pair_kinematics(
+        (0, 1, (0, 0)), roles, A, B, closest, old)
+    levers = {k: 0.5 * ((o0 - start[k].centre) + (o1 - centres[k])) for k in (0, 1)}
+    rigid = {k: move[k][0] + np.cross(move[k][1], levers[k]) for k in (0, 1)}
+    assert turn_a == pytest.approx(move[a][1], abs=1e-15)
+    assert turn_b == pytest.approx(move[b][1], abs=1e-15)
+    assert mid_a == pytest.approx(levers[a], abs=1e-15)
+    assert mid_b == pytest.approx(levers[b], abs=1e-15)
+    assert shift == pytest.approx(rigid[b] - rigid[a], abs=1e-15)
+    assert np.linalg.norm(shift) > 1e-6                  # a motion that the test can see
+
+
 def test_wrap_keeps_a_centre_a_rounding_below_zero_inside_the_box():
     """−1e-19 m wrapped by L would round to L, outside [0, L): it stays at 0, unmoved."""
     L = 10 * R
