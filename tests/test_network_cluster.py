@@ -708,7 +708,8 @@ def test_a_periodic_array_of_identical_spheres_shares_the_load_bit_for_bit():
 def test_wrap_brings_particles_from_other_images_back_and_keeps_every_contact():
     """The groove of three spheres with each particle placed in another image of a
     rectangular periodic box (L_x = 10R, L_y = 7R; A one box to the right and two down, B two
-    to the left and three up, C one down): the solve finds the groove through the images. After
+    to the left and three up, C two to the right and one down): the solve finds the groove
+    through the images. After
     :func:`wrap` every centre is its own modulo the box (np.mod, by hand), each pair's
     separation c_j + image L − c_i is what it was, each history's stored bodies are the
     wrapped particles (a plate contact's its particle, a pair's a and b moved by a's jump, so
@@ -718,7 +719,7 @@ def test_wrap_brings_particles_from_other_images_back_and_keeps_every_contact():
     box = np.array([Lx, Ly])
     s = 1.2 * R
     zc = R + math.sqrt(4 * R * R - s * s) - 8e-6
-    jumps = [(1, -2), (-2, 3), (0, -1)]                      # A, B, C: whole boxes
+    jumps = [(1, -2), (-2, 3), (2, -1)]                      # A, B, C: whole boxes
     base = [(3 * R, 2 * R, R), (3 * R + 2 * s, 2 * R, R), (3 * R + s, 2 * R, zc)]
     bodies = [Body(Sphere(R), MAT, centre=(x + m[0] * Lx, y + m[1] * Ly, z))
               for (x, y, z), m in zip(base, jumps, strict=True)]
@@ -762,6 +763,15 @@ def test_wrap_brings_particles_from_other_images_back_and_keeps_every_contact():
         assert c.normal_force == pytest.approx(
             next(d.normal_force for d in result.contacts if d.i == c.i and d.j == c.j),
             rel=1e-5)
+    # a centre at −1e-19 m, which −1e-19 + L would round to L, stays at 0: not a jump of a box
+    edge = [b.moved(centre=(-1e-19, b.centre[1], b.centre[2])) if k == old_pairs[0][1] else b
+            for k, b in enumerate(result.bodies)]
+    _, renamed = wrap(edge, result.histories, (Lx, Ly))
+    before = np.array([b.centre for b in edge])
+    after = np.array([b.centre for b in wrap(edge, {}, (Lx, Ly))[0]])
+    assert after[old_pairs[0][1], 0] == 0.0
+    for old, new in zip(old_pairs, sorted(k for k in renamed if len(k) == 3), strict=True):
+        assert separation(after, new) == pytest.approx(separation(before, old), abs=1e-15)
 
 
 @pytest.mark.parametrize("start_gap, history", [(-1e-6, False), (-1e-6, True), (2e-6, False)])
