@@ -238,6 +238,9 @@ class Simulation:
         if mu_pp is None and box is not None:
             raise ValueError("box (network.box) needs mu_pp (network.mu_pp): a periodic box is "
                              "a property of a network of touching particles")
+        if mu_pp is None and network_energy_tol is not None:
+            raise ValueError("network_energy_tol (network.energy_tol) needs mu_pp "
+                             "(network.mu_pp): only the network engine cuts steps")
         if mu_pp is not None:
             from .network.run import NetworkEngine
 
