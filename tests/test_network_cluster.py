@@ -397,6 +397,68 @@ def test_groove_matches_the_statics_by_hand(groove):
     check_groove(groove[1])
 
 
+def test_each_contact_report_is_its_contact_seen_from_its_particle(groove):
+    """The groove numbered in reverse (C, B, A: the internal order differs from the user's),
+    every field of every contact report against the geometry and Hertz, computed here: i and j
+    the user's particles (a pair's i the smaller); the normal from i's centroid towards j
+    (spheres: the line of centres; a plate: ∓z); the force on i, its normal part −N n; the
+    pressure centroid on the line of centres at i's radius (a plate: under or over the
+    centroid, within the contact radius); moment_i = (point − c_i) × force and moment_j =
+    (point − c_j) × (−force) (zero for a plate), within 10⁻³ of R N; the approach and the
+    area those of Hertz for N (R* = R/2 and the pair's E* between particles; 30 cells per
+    radius: within 5 % and 12 %); one spot; all sticking; slip and shift increment 3-vectors
+    in the tangent plane; each history keyed and roled as its report."""
+    bodies, _ = groove
+    result = solve_cluster(bodies[::-1], mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F,
+                           numerics=COARSE)
+    centres = np.array([b.centre for b in result.bodies])
+    assert len(result.contacts) == 5        # A, B on the lower plate, C under the upper, 2 pairs
+    for c in result.contacts:
+        ci = centres[c.i]
+        N = c.normal_force
+        assert N > 0.1 * F
+        if isinstance(c.j, str):
+            lower = c.j == "lower"
+            assert c.key == (c.i, c.j)
+            assert c.normal == pytest.approx([0.0, 0.0, -1.0 if lower else 1.0], abs=1e-12)
+            assert c.point[2] == pytest.approx(0.0 if lower else result.gap, abs=1e-12)
+            a = (3 * N * R / (4 * E_STAR)) ** (1 / 3)
+            assert np.hypot(*(c.point[:2] - ci[:2])) < a
+            assert np.array_equal(c.moment_j, np.zeros(3))
+            e_star, radius = E_STAR, R
+            assert result.histories[c.key].roles == (c.i, c.j)
+        else:
+            i, j, image = c.key
+            assert (c.i, c.j) == (i, j) and i < j and image == (0, 0)
+            cj = centres[j]
+            n = (cj - ci) / np.linalg.norm(cj - ci)
+            assert c.normal == pytest.approx(n, abs=1e-6)
+            assert c.point == pytest.approx(ci + R * n, abs=0.01 * R)
+            assert c.moment_j == pytest.approx(np.cross(c.point - cj, -c.force), abs=1e-3 * R * F)
+            e_star, radius = E_STAR_PAIR, R / 2
+            assert set(result.histories[c.key].roles) == {i, j}
+        assert c.force @ c.normal == pytest.approx(-N, rel=1e-9)
+        assert c.tangential_force == pytest.approx(c.force + N * c.normal, abs=1e-12 * F)
+        assert c.moment_i == pytest.approx(np.cross(c.point - ci, c.force), abs=1e-3 * R * F)
+        delta = hertz_approach(N, radius, e_star)
+        assert c.approach == pytest.approx(delta, rel=0.05)
+        assert c.area == pytest.approx(math.pi * radius * delta, rel=0.12)
+        assert c.spots == 1 and c.state == "stick" and not c.sliding
+        assert 0 < c.stick_area <= c.area
+        for vector in (c.slip, c.shift_increment):
+            assert vector.shape == (3,) and abs(vector @ c.normal) < 1e-12 * R
+
+
+def test_a_particle_whose_every_contact_slides_is_said_to_slide():
+    """A sphere between frictionless plates: both contacts slide (a frictionless contact
+    always does), so it "slides"; with μ = 0.3 it sticks."""
+    for mu, expected in ((0.0, "slide"), (0.3, "stick")):
+        result = solve_cluster([sphere(0.0, R)], mu_up=mu, mu_low=mu, mu_pp=mu, force=F,
+                               numerics=COARSE)
+        assert result.kinematics == (expected,)
+        assert all(c.sliding == (mu == 0) for c in result.contacts)
+
+
 def test_groove_does_not_depend_on_numbering(groove):
     """The particles given in reverse order: the same poses and contact forces, bit for bit."""
     bodies, result = groove
