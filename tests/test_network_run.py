@@ -169,6 +169,67 @@ def test_permuting_the_particles_permutes_the_results_bit_for_bit(moduli):
     assert np.array_equal(ds.plate_gap.values, other.plate_gap.values)
 
 
+# --- a particle placed on another: layers several grains thick -------------------------------
+def _column(top_z):
+    """Two spheres of R, the second placed on the first at centre height ``top_z``."""
+    return tb.Layer([tb.PlacedParticle(tb.Particle(Sphere(R), MAT), (0.0, 0.0)),
+                     tb.PlacedParticle(tb.Particle(Sphere(R), MAT), (0.0, 0.0), z=top_z)])
+
+
+def test_a_sphere_placed_on_another_is_three_hertz_contacts_in_series():
+    """A column of two spheres through a run (the second at z = 3R, touching the first): each
+    contact carries F_N; the gap is 4R less Hertz's approaches at both plates and between the
+    spheres (R* = R/2, the pair's E*): 0.65 % and 0.44 % of the compression off at 20 cells per
+    size, 0.19 % and 0.20 % at 40 (measured). Placed 5 µm higher, the plate first touches it
+    at 4R + 5 µm and the column closes: the same end."""
+    e_pair = 1 / (2 * (1 - NU**2) / 1e9)
+
+    def approach(force, radius, e_star):
+        a = (3 * force * radius / (4 * e_star)) ** (1 / 3)
+        return a * a / radius
+
+    errors = []
+    for resolution in (20, 40):
+        sim, ds = _run(_column(3 * R), stop=2.0, resolution=resolution)
+        F = ds.total_force.values
+        expected = 4 * R - 2 * approach(F, R, 1e9 / (1 - NU**2)) - approach(F, R / 2, e_pair)
+        errors.append(np.abs(ds.plate_gap.values - expected) / (4 * R - expected))
+        upper = ds.plate_normal_force.sel(interface="upper").values
+        lower = ds.plate_normal_force.sel(interface="lower").values
+        assert lower[:, 0] == pytest.approx(F, rel=1e-5) and (lower[:, 1] == 0).all()
+        assert upper[:, 1] == pytest.approx(F, rel=1e-5) and (upper[:, 0] == 0).all()
+        assert (ds.particle_contacts.values == 1).all()
+        assert ds.centroid_height.values[0, 1] > 2 * R      # on the first, not on the plate
+        assert sim.d0 == pytest.approx(4 * R, rel=1e-12)
+    assert errors[0].max() < 0.012 and errors[1].max() < 0.004
+    assert errors[1].max() < errors[0].max()
+    _, lifted = _run(_column(3 * R + 5e-6), stop=2.0, resolution=20)
+    assert lifted.plate_gap.values == pytest.approx(ds.plate_gap.values, rel=1e-4)
+    assert lifted.attrs["inputs"]                          # the height is among the inputs
+    assert '"z": 0.003005' in lifted.attrs["inputs"]
+
+
+def test_a_stacked_particle_is_placed_checked_and_written_back():
+    """z below the resting height, a stacked layer without mu_pp, and two stacked spheres that
+    overlap are refused, naming what is wrong; [[particles]] z reads, builds and writes back."""
+    sphere = tb.Particle(Sphere(R), MAT)
+    with pytest.raises(ValueError, match=r"z must be a finite number >= 0\.001 m"):
+        tb.PlacedParticle(sphere, (0.0, 0.0), z=0.5 * R)
+    assert tb.PlacedParticle(sphere, (0.0, 0.0), z=R).stacked is False
+    with pytest.raises(ValueError, match=r"particle 1 is placed above the lower plate .* mu_pp"):
+        tb.Simulation(_column(3 * R), tb.Plates(0.3), tb.LinearRamp(stop=1.0))
+    with pytest.raises(tb.LayerError, match="particles 0 and 1 overlap"):
+        _column(2.9 * R)
+    table = {**_BASE, "particles": [dict(_BASE["particles"][0], x=0.0),
+                                    dict(_BASE["particles"][0], x=0.0, z=3 * R)],
+             "network": {"mu_pp": 0.3}}
+    cfg = parse_config(table)
+    layer = cfg.build()[0]
+    assert [p.z for p in layer] == [None, 3 * R] and layer[1].top == pytest.approx(4 * R)
+    again = parse_config(__import__("tomllib").loads(cfg.to_toml()))
+    assert [p.z for p in again.build()[0]] == [None, 3 * R]
+
+
 # --- identical particles touching in a periodic box -------------------------------------------
 def _row():
     """Three identical spheres in a row, each touching the next, in a periodic 6R x 4R box (the

@@ -218,7 +218,9 @@ class Simulation:
                         for p, c in zip(self.layer, cells, strict=True)]
         self.cell_size = cells[0]
         self.resolution = self.layer[0].particle.shape.size / self.cell_size
-        self.d0 = max(m.d0 for m in self.members)
+        # the gap at which the upper plate first touches the layer (a stacked particle's top
+        # is its height above the lower plate plus its highest point)
+        self.d0 = max(max(m.d0 for m in self.members), max(p.top for p in self.layer))
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers must be an integer >= 1, got {workers!r}")
         self.workers = workers
@@ -238,6 +240,12 @@ class Simulation:
         if mu_pp is None and box is not None:
             raise ValueError("box (network.box) needs mu_pp (network.mu_pp): a periodic box is "
                              "a property of a network of touching particles")
+        stacked = [i for i, p in enumerate(self.layer) if p.stacked]
+        if mu_pp is None and stacked:
+            raise ValueError(
+                f"particle {stacked[0]} is placed above the lower plate (z = "
+                f"{self.layer[stacked[0]].z:.6g} m): only a network run, which holds a particle "
+                f"by its neighbours, can load it; give mu_pp (network.mu_pp)")
         if mu_pp is None and network_energy_tol is not None:
             raise ValueError("network_energy_tol (network.energy_tol) needs mu_pp "
                              "(network.mu_pp): only the network engine cuts steps")
@@ -318,7 +326,7 @@ class Simulation:
         if self.single:
             return {**self._particle_inputs(self.particle), **common}
         particles = [{**self._particle_inputs(p.particle), "x": p.xy[0], "y": p.xy[1],
-                      "cell_size": m.cell_size}
+                      **({"z": p.z} if p.stacked else {}), "cell_size": m.cell_size}
                      for p, m in zip(self.layer, self.members, strict=True)]
         return {"particles": particles, **common}
 

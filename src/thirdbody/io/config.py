@@ -167,6 +167,9 @@ class Particle(_Model):
 class PlacedParticle(Particle):
     x: _Num = Field(0.0, allow_inf_nan=False, description="centroid x, m")
     y: _Num = Field(0.0, allow_inf_nan=False, description="centroid y, m")
+    z: _Num | None = Field(None, allow_inf_nan=False,
+                           description="centroid height above the lower plate, m (default: "
+                                       "resting on it; higher: stacked, needs [network])")
 
 
 class LayerGenerator(_Model):
@@ -341,7 +344,8 @@ class Config(_Model):
         if isinstance(data, dict) and isinstance(data.get("particle"), dict):
             data = {**data, "particle": _split(data["particle"])}
         if isinstance(data, dict) and isinstance(data.get("particles"), list):
-            data = {**data, "particles": [_split(p, ("x", "y")) for p in data["particles"]]}
+            data = {**data, "particles": [_split(p, ("x", "y", "z"))
+                                          for p in data["particles"]]}
         return data
 
     @model_validator(mode="after")
@@ -414,7 +418,7 @@ class Config(_Model):
         if self.particle is not None:
             body = self._particle(self.particle)
         elif self.particles is not None:
-            body = tb.Layer([tb.PlacedParticle(self._particle(p), (p.x, p.y))
+            body = tb.Layer([tb.PlacedParticle(self._particle(p), (p.x, p.y), p.z)
                              for p in self.particles])
         else:
             lc = self.layer

@@ -208,7 +208,7 @@ def _surface(shape: Shape, subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
 
 def _fill_poses(results: _Results, layer: Layer) -> tuple[np.ndarray, np.ndarray]:
     """Quaternions and centres with non-finite poses replaced by the previous step's (at step
-    0: the initial orientation, resting on the lower plate at the initial position)."""
+    0: the initial orientation, at the initial position and height)."""
     quat = results.quaternion.copy()
     centre = results.centre.copy()
     for p, placed in enumerate(layer):
@@ -220,8 +220,7 @@ def _fill_poses(results: _Results, layer: Layer) -> tuple[np.ndarray, np.ndarray
             else:
                 rotation = placed.particle.orientation
                 quat[s, p] = rotation.as_quat()
-                z = -placed.particle.shape.lowest_point(rotation)[2]
-                centre[s, p] = (*placed.xy, z)
+                centre[s, p] = (*placed.xy, placed.height)
     return quat, centre
 
 

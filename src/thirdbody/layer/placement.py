@@ -42,10 +42,16 @@ class LayerError(ValueError):
 
 @dataclass(frozen=True)
 class PlacedParticle:
-    """A particle and the horizontal position (x, y) of its centroid, m."""
+    """A particle and the horizontal position (x, y) of its centroid, m, and optionally its
+    height ``z`` above the lower plate, m (default None: resting on the lower plate, the
+    lowest point of its initial orientation at z = 0). A height above that places it off the
+    plate, e.g. on top of other particles (a layer several grains thick); only a network run
+    (``mu_pp``) can load such a layer, since a particle off the plate is held by its
+    neighbours."""
 
     particle: Particle
     xy: tuple[float, float] = (0.0, 0.0)
+    z: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.particle, Particle):
@@ -55,6 +61,39 @@ class PlacedParticle:
             raise ValueError(f"particle position xy must be two finite numbers (m), got "
                              f"{self.xy!r}")
         object.__setattr__(self, "xy", (float(xy[0]), float(xy[1])))
+        if self.z is not None:
+            z = float(self.z)
+            rest = self.rest_height
+            # a rounding below the rest height is resting (1e-12 of the size)
+            if not math.isfinite(z) or z < rest - 1e-12 * self.particle.shape.size:
+                raise ValueError(
+                    f"particle height z must be a finite number >= {rest:.6g} m (its centroid "
+                    f"when it rests on the lower plate: lower, it would cut into the plate), "
+                    f"got {self.z!r}")
+            object.__setattr__(self, "z", max(z, rest))
+
+    @property
+    def rest_height(self) -> float:
+        """The centroid's height when the particle rests on the lower plate, m."""
+        p = self.particle
+        return -float(p.shape.lowest_point(p.orientation)[2])
+
+    @property
+    def height(self) -> float:
+        """The centroid's height above the lower plate, m (``z``, or resting)."""
+        return self.rest_height if self.z is None else float(self.z)
+
+    @property
+    def top(self) -> float:
+        """The height of the particle's highest point above the lower plate, m: the gap at
+        which the upper plate first touches it."""
+        p = self.particle
+        return self.height + float(p.shape.highest_point(p.orientation)[2])
+
+    @property
+    def stacked(self) -> bool:
+        """Placed above its rest height (off the lower plate)."""
+        return self.z is not None and self.z > self.rest_height
 
 
 def _footprint(shape: Shape, rotation: Rotation) -> tuple[np.ndarray, ...]:
@@ -99,8 +138,8 @@ def first_overlap(shapes: Sequence[Shape], rotations: Sequence[Rotation],
 class Layer:
     """Particles placed between the plates (:class:`PlacedParticle`), in a fixed order.
 
-    Refuses overlapping particles (each resting on the lower plate in its initial orientation)
-    with a :class:`LayerError` naming the pair.
+    Refuses overlapping particles (each resting on the lower plate in its initial orientation,
+    or at its height ``z``) with a :class:`LayerError` naming the pair.
     """
 
     def __init__(self, placed: Sequence[PlacedParticle],
@@ -114,8 +153,7 @@ class Layer:
                                 f"{type(p).__name__}")
         self.placed: tuple[PlacedParticle, ...] = tuple(placed)
         rotations = [p.particle.orientation for p in placed]
-        centres = [(*p.xy, -p.particle.shape.lowest_point(r)[2])
-                   for p, r in zip(placed, rotations, strict=True)]
+        centres = [(*p.xy, p.height) for p in placed]
         if periodic and box is None:
             raise LayerError("a periodic layer needs its box (L_x, L_y), m")
         self.box = None if box is None else (float(box[0]), float(box[1]))

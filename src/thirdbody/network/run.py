@@ -317,7 +317,7 @@ class NetworkEngine:
         self.energy_tol = energy_tol
         self.d0 = d0
         # each particle's height at rest: the gap at which the upper plate first touches it
-        self.tops = [float(p.particle.shape.height(p.particle.orientation)) for p in layer]
+        self.tops = [p.top for p in layer]
         self.box = None if box is None else (float(box[0]), float(box[1]))
         # the cluster's coordinates: the layer's, moved so that a box starts at the origin
         self.origin = np.zeros(3) if self.box is None else np.array(
@@ -337,8 +337,7 @@ class NetworkEngine:
 
             shapes = [p.particle.shape for p in layer]
             rotations = [p.particle.orientation for p in layer]
-            centres = np.array([(*p.xy, -p.particle.shape.lowest_point(r)[2])
-                                for p, r in zip(layer, rotations, strict=True)])
+            centres = np.array([(*p.xy, p.height) for p in layer])
             hit = _first_overlap_across(shapes, rotations, centres, self.box)
             if hit is not None:
                 raise ValueError(f"box (network.box): particles {hit[0]} and {hit[1]} overlap "
@@ -347,13 +346,13 @@ class NetworkEngine:
         self.numerics = ClusterNumerics(cell_size=list(cells), tol=tol, solver_tol=solver_tol)
 
     def initial_state(self) -> NetworkState:
-        """Every particle at its initial orientation, resting on the lower plate."""
+        """Every particle at its initial orientation, resting on the lower plate or at its
+        height ``z``."""
         bodies = []
         for placed in self.layer:
             p = placed.particle
             rotation = p.orientation
-            lift = -float(p.shape.lowest_point(rotation)[2])
-            centre = np.array([placed.xy[0], placed.xy[1], lift]) - self.origin
+            centre = np.array([placed.xy[0], placed.xy[1], placed.height]) - self.origin
             bodies.append(Body(p.shape, p.material, rotation, centre))
         return NetworkState(bodies, {}, None, np.zeros((len(bodies), 3)))
 
