@@ -1,0 +1,90 @@
+"""A layer two grains thick, compressed, then sheared: the effective friction of a packing whose
+grains interlock (issue 26).
+
+Spheres of R = 1 mm (E = 1 GPa, ν = 0.3) in a periodic box: an n × n square bottom layer on
+the lower plate (spacing 2R (1 + 1e-4), neighbours just apart) and an n × n top layer, each
+top sphere in a pocket of four bottom ones (placed with ``PlacedParticle(z=...)`` 0.1 µm above
+touching them). Plates μ = 0.5, μ_pp from ``--mu-pp``, 20 cells per size, tol 1e-4 (the
+tolerance floor of 20 cells; 1e-5 stalls at 1.1e-5). Pressed by 0.5 N per top sphere in
+three steps, then the upper plate slides ``--distance`` along x in ``--steps`` equal steps,
+the force held (a step that does not converge is cut into halves up to 4 times). Per step it
+prints the wall time so far, the passes, the sub-steps, the gap, μ_eff, the dilatancy and the
+energy residual.
+
+With μ_pp = 0 the packing is a mechanism: no pair contact can turn a sphere, so each top
+sphere's moment balance leaves its upper contact no tangential force, and μ_eff is 0 whatever
+the packing (the bottom layer rolls on the lower plate, the top one rolls over it).
+
+    .venv/bin/python benchmarks/gouge.py --mu-pp 0.3 --distance 100e-6 --steps 50
+    .venv/bin/python benchmarks/gouge.py --mu-pp 0 --distance 100e-6 --steps 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+import warnings
+
+import numpy as np
+
+import thirdbody as tb
+from thirdbody.shapes import Sphere
+
+R = 1e-3                        # m
+MATERIAL = tb.Material(1e9, 0.3)
+SPREAD = 1e-4                   # the bottom layer's spacing 2R (1 + SPREAD)
+LIFT = 1e-7                     # m: the top layer above touching the bottom one
+
+
+def two_layers(n: int) -> tb.Layer:
+    """The n × n bottom layer and the n × n top layer in its pockets, periodic."""
+    a = 2 * R * (1 + SPREAD)
+    top = R + math.sqrt(4 * R * R - 2 * (a / 2) ** 2) + LIFT
+    side = n * a
+    placed = []
+    for shift, z in ((0.25, None), (0.75, top)):
+        for i in range(n):
+            for j in range(n):
+                xy = (-side / 2 + a * (i + shift), -side / 2 + a * (j + shift))
+                placed.append(tb.PlacedParticle(tb.Particle(Sphere(R), MATERIAL), xy, z=z))
+    return tb.Layer(placed, box=(side, side), periodic=True)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--size", type=int, default=2, help="n: n x n spheres in each layer")
+    parser.add_argument("--mu-pp", type=float, default=0.3, help="friction between spheres")
+    parser.add_argument("--distance", type=float, default=100e-6, help="sliding distance, m")
+    parser.add_argument("--steps", type=int, default=50, help="sliding steps")
+    parser.add_argument("--out", default=None, help="write the results here (.nc)")
+    args = parser.parse_args(argv)
+    n = args.size
+    program = tb.Slide(force=0.5 * n * n, distance=args.distance, steps=args.steps,
+                       compress_steps=3)
+    sim = tb.Simulation(two_layers(n), tb.Plates(0.5), program, mu_pp=args.mu_pp,
+                        resolution=20, network_tol=1e-4, network_cutbacks=4)
+    start = time.perf_counter()
+
+    def progress(record) -> None:
+        v = record.values
+        print(f"step {record.step:3d}: {time.perf_counter() - start:6.0f} s, "
+              f"{v.get('network_iterations')} passes, {v.get('network_substeps')} sub-steps, "
+              f"gap {v.get('plate_gap', np.nan) * 1e3:.6f} mm, "
+              f"mu_eff {v.get('mu_eff_sliding', np.nan):.5g}, "
+              f"dilatancy {v.get('dilatancy', np.nan) * 1e6:.4g} um, "
+              f"energy residual {v.get('energy_residual', np.nan):.2e}", flush=True)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = sim.run(progress=progress)
+    print(f"{2 * n * n} spheres in two layers, mu_pp {args.mu_pp}: {sim.status}, "
+          f"{time.perf_counter() - start:.0f} s wall")
+    if args.out:
+        from thirdbody.io.results import write_results
+
+        write_results(ds, args.out)
+
+
+if __name__ == "__main__":
+    main()
