@@ -15,6 +15,15 @@ With μ_pp = 0 the packing is a mechanism: no pair contact can turn a sphere, so
 sphere's moment balance leaves its upper contact no tangential force, and μ_eff is 0 whatever
 the packing (the bottom layer rolls on the lower plate, the top one rolls over it).
 
+With friction enough between the grains the layer locks: each top sphere, stuck to the upper
+plate, rolls without slip over the pair of bottom spheres ahead of it, which stay put. Rigid
+kinematics then give the plate's path (no energy is dissipated, so μ_eff = dh/ds): in the
+vertical plane of its motion the top centre C turns about the pair's axis B at the distance
+ρ = √(4R² − (a/2)²), d = B − C = ρ (sin φ, −cos φ), and rolling at the pair and at the plate
+gives dh/ds = ρ sin φ / (2R + ρ cos φ), with cos φ = cos φ₀ + Δh/ρ as it rises by Δh
+(sin φ₀ = a/(2ρ) in the pocket): 0.2929 at the start, falling as it climbs. ``mu_rolling``
+below; the run prints it beside μ_eff.
+
     .venv/bin/python benchmarks/gouge.py --mu-pp 0.3 --distance 100e-6 --steps 50
     .venv/bin/python benchmarks/gouge.py --mu-pp 0 --distance 100e-6 --steps 10
 """
@@ -51,6 +60,17 @@ def two_layers(n: int) -> tb.Layer:
     return tb.Layer(placed, box=(side, side), periodic=True)
 
 
+def mu_rolling(rise: float) -> float:
+    """μ_eff = dh/ds of the locked two layers (module docstring) after the top layer rose by
+    ``rise`` (m) from its pocket: top spheres rolling without slip over the fixed bottom pairs
+    ahead of them, stuck to the upper plate."""
+    a = 2 * R * (1 + SPREAD)
+    rho = math.sqrt(4 * R * R - (a / 2) ** 2)
+    cos = math.sqrt(1 - (a / (2 * rho)) ** 2) + rise / rho
+    sin = math.sqrt(1 - cos * cos)
+    return rho * sin / (2 * R + rho * cos)
+
+
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--size", type=int, default=2, help="n: n x n spheres in each layer")
@@ -72,7 +92,8 @@ def main(argv: list[str] | None = None) -> None:
               f"{v.get('network_iterations')} passes, {v.get('network_substeps')} sub-steps, "
               f"gap {v.get('plate_gap', np.nan) * 1e3:.6f} mm, "
               f"mu_eff {v.get('mu_eff_sliding', np.nan):.5g}, "
-              f"dilatancy {v.get('dilatancy', np.nan) * 1e6:.4g} um, "
+              f"dilatancy {v.get('dilatancy', np.nan) * 1e6:.4g} um (rolling over the "
+              f"bottom pairs: mu_eff {mu_rolling(max(v.get('dilatancy', 0.0), 0.0)):.5g}), "
               f"energy residual {v.get('energy_residual', np.nan):.2e}", flush=True)
 
     with warnings.catch_warnings():
