@@ -397,21 +397,26 @@ def test_groove_matches_the_statics_by_hand(groove):
     check_groove(groove[1])
 
 
-def test_each_contact_report_is_its_contact_seen_from_its_particle(groove):
-    """The groove numbered in reverse (C, B, A: the internal order differs from the user's),
-    every field of every contact report against the geometry and Hertz, computed here: i and j
-    the user's particles (a pair's i the smaller); the normal from i's centroid towards j
-    (spheres: the line of centres; a plate: ∓z); the force on i, its normal part −N n; the
-    pressure centroid on the line of centres at i's radius (a plate: under or over the
-    centroid, within the contact radius); moment_i = (point − c_i) × force and moment_j =
-    (point − c_j) × (−force) (zero for a plate), within 10⁻³ of R N; the approach and the
-    area those of Hertz for N (R* = R/2 and the pair's E* between particles; 30 cells per
-    radius: within 5 % and 12 %); one spot; all sticking; slip and shift increment 3-vectors
-    in the tangent plane; each history keyed and roled as its report."""
+@pytest.mark.parametrize("reverse", [False, True])
+def test_each_contact_report_is_its_contact_seen_from_its_particle(groove, reverse):
+    """The groove numbered as given and in reverse (C, B, A: a pair's particle i is then the
+    other body of its solved contact), every field of every contact report against the
+    geometry and Hertz, computed here: i and j the user's particles (a pair's i the smaller);
+    the normal from i's centroid towards j (spheres: the line of centres; a plate: ∓z); the
+    force on i, its normal part −N n; the pressure centroid on the line of centres at i's
+    radius (a plate: under or over the centroid, within the contact radius);
+    moment_i = (point − c_i) × force and moment_j = (point − c_j) × (−force) (zero for a
+    plate), within 10⁻³ of R N; the approach, the area and a/R those of Hertz for N (R* = R/2
+    and the pair's E* between particles; 30 cells per radius: within 5 %, 12 % and 6 %); the
+    contact's own μ; one spot; all sticking; slip and shift increment 3-vectors in the tangent
+    plane; each history keyed and roled as its report; the plates' forces in balance."""
     bodies, _ = groove
-    result = solve_cluster(bodies[::-1], mu_up=0.6, mu_low=0.6, mu_pp=0.6, force=F,
-                           numerics=COARSE)
+    mus = {"upper": 0.6, "lower": 0.55, "pair": 0.65}
+    result = solve_cluster(bodies[::-1] if reverse else bodies, mu_up=mus["upper"],
+                           mu_low=mus["lower"], mu_pp=mus["pair"], force=F, numerics=COARSE)
     centres = np.array([b.centre for b in result.bodies])
+    # the plates' forces on the layer balance (nothing else acts on it)
+    assert result.lower_force == pytest.approx(-np.asarray(result.plate_force), abs=1e-4 * F)
     assert len(result.contacts) == 5        # A, B on the lower plate, C under the upper, 2 pairs
     for c in result.contacts:
         ci = centres[c.i]
@@ -427,6 +432,7 @@ def test_each_contact_report_is_its_contact_seen_from_its_particle(groove):
             assert np.array_equal(c.moment_j, np.zeros(3))
             e_star, radius = E_STAR, R
             assert result.histories[c.key].roles == (c.i, c.j)
+            assert c.mu == mus[c.j]
         else:
             i, j, image = c.key
             assert (c.i, c.j) == (i, j) and i < j and image == (0, 0)
@@ -437,26 +443,73 @@ def test_each_contact_report_is_its_contact_seen_from_its_particle(groove):
             assert c.moment_j == pytest.approx(np.cross(c.point - cj, -c.force), abs=1e-3 * R * F)
             e_star, radius = E_STAR_PAIR, R / 2
             assert set(result.histories[c.key].roles) == {i, j}
+            assert c.mu == mus["pair"]
         assert c.force @ c.normal == pytest.approx(-N, rel=1e-9)
         assert c.tangential_force == pytest.approx(c.force + N * c.normal, abs=1e-12 * F)
         assert c.moment_i == pytest.approx(np.cross(c.point - ci, c.force), abs=1e-3 * R * F)
         delta = hertz_approach(N, radius, e_star)
         assert c.approach == pytest.approx(delta, rel=0.05)
         assert c.area == pytest.approx(math.pi * radius * delta, rel=0.12)
+        # the contact radius over the smallest radius of curvature (R for both kinds)
+        assert c.half_space_ratio == pytest.approx(math.sqrt(radius * delta) / R, rel=0.06)
         assert c.spots == 1 and c.state == "stick" and not c.sliding
         assert 0 < c.stick_area <= c.area
         for vector in (c.slip, c.shift_increment):
             assert vector.shape == (3,) and abs(vector @ c.normal) < 1e-12 * R
 
 
+@pytest.mark.parametrize("reverse", [False, True])
+def test_a_pair_report_of_unequal_spheres_takes_each_moment_about_its_own_centre(reverse):
+    """A sphere of R pressed by the plates and one of 0.7 R wedged beside it on the lower
+    plate, in a periodic row (the network_row example's two spheres: centres 1.7 R apart, the
+    small one lower: oblique contacts on both its sides), given in either order: each pair
+    report is seen from its smaller user index, its force on i and its moments
+    (point − c_i) × force and (point − c_j') × (−force) (j' the image that meets i), which
+    differ for unequal spheres, computed here (within 10⁻³ of R N)."""
+    r = 0.7 * R
+    dx = math.sqrt((R + r) ** 2 - (R - r) ** 2) - 0.5e-6
+    box = (4 * dx, 4 * R)
+    bodies = [Body(Sphere(size), MAT, centre=((k + 0.5) * dx, 2 * R, size))
+              for k, size in enumerate((R, r, R, r))]
+    result = solve_cluster(bodies[::-1] if reverse else bodies, mu_up=0.5, mu_low=0.5,
+                           mu_pp=0.5, force=F, numerics=COARSE, box=box)
+    check_balanced(result)
+    pairs = [c for c in result.contacts if not isinstance(c.j, str)]
+    assert len(pairs) == 4
+    centres = np.array([b.centre for b in result.bodies])
+    for pair in pairs:
+        _, _, image = pair.key
+        ci = centres[pair.i]
+        cj = centres[pair.j] + np.array([image[0] * box[0], image[1] * box[1], 0.0])
+        check_pair_moments(pair, ci, cj)
+
+
+def check_pair_moments(pair, ci, cj):
+    """A pair report's normal, force and moments about both centres (c_j at its image)."""
+    assert pair.i < pair.j and pair.normal_force > 0.01 * F
+    # the point between i and j's image, at each one's radius along the line of centres
+    span = np.linalg.norm(cj - ci)
+    assert np.linalg.norm(pair.point - ci) + np.linalg.norm(pair.point - cj) == pytest.approx(
+        span, abs=1e-5 * R)
+    # (the line of centres to 8e-5 rad here: the spheres drift sideways along a neutral mode
+    # by 0.1 µm, and the contact reported is the last evaluated one)
+    assert pair.normal == pytest.approx((cj - ci) / np.linalg.norm(cj - ci), abs=2e-4)
+    arm_i, arm_j = np.cross(pair.point - ci, pair.force), np.cross(pair.point - cj, -pair.force)
+    assert np.linalg.norm(arm_i - arm_j) > 0.05 * R * pair.normal_force   # they differ
+    assert pair.moment_i == pytest.approx(arm_i, abs=1e-3 * R * F)
+    assert pair.moment_j == pytest.approx(arm_j, abs=1e-3 * R * F)
+
+
 def test_a_particle_whose_every_contact_slides_is_said_to_slide():
-    """A sphere between frictionless plates: both contacts slide (a frictionless contact
-    always does), so it "slides"; with μ = 0.3 it sticks."""
+    """The column of two spheres without friction: every contact, plate and pair, slides (a
+    frictionless contact always does), so both particles "slide"; with μ = 0.3 they stick."""
     for mu, expected in ((0.0, "slide"), (0.3, "stick")):
-        result = solve_cluster([sphere(0.0, R)], mu_up=mu, mu_low=mu, mu_pp=mu, force=F,
+        result = solve_cluster(column(), mu_up=mu, mu_low=mu, mu_pp=mu, force=F,
                                numerics=COARSE)
-        assert result.kinematics == (expected,)
+        assert result.kinematics == (expected,) * 2
+        assert len(result.contacts) == 3
         assert all(c.sliding == (mu == 0) for c in result.contacts)
+        assert all(c.state == expected for c in result.contacts)
 
 
 def test_groove_does_not_depend_on_numbering(groove):
@@ -602,6 +655,9 @@ def test_a_sphere_rolls_under_the_sliding_plate(ds):
     assert abs(result.plate_force[0]) < 1e-5 * F
     for c in result.contacts:
         assert c.state == "stick"
+    # every contact sticks and it turned (by Δs/h, more than stick_rotation = 1e-3 rad at
+    # 20 µm; 1 µm turns it by 5e-4 rad, which counts as sticking)
+    assert result.kinematics == ("roll" if ds / h > 1e-3 else "stick",)
 
 
 def test_a_tilted_ellipsoid_rolls_under_the_sliding_plate():
@@ -1048,6 +1104,7 @@ def test_a_pressed_hexagonal_monolayer_rubs_at_its_oblique_pairs_too(cells, tole
     pairs = [c for c in slid.contacts if not isinstance(c.j, str)]
     assert len(pairs) == 36 and all(c.sliding for c in pairs)
     assert not any(c.sliding for c in slid.contacts if isinstance(c.j, str))
+    assert slid.kinematics == ("roll",) * 12         # some contacts slide, the others stick
     hertz = 4 / 3 * E_STAR_PAIR * math.sqrt(R / 2) * (2 * R * 1e-3) ** 1.5
     reference = 2 * mu_pp * hertz / load
     assert slid.plate_force[0] / (12 * load) == pytest.approx(reference, rel=tolerance)

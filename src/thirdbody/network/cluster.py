@@ -222,7 +222,8 @@ class ContactReport:
     tangential_force : (3,) array
         Tangential part of ``force``, N.
     point : (3,) array
-        Pressure centroid, m.
+        Pressure centroid, m, beside particle i (across a periodic side: between i and the
+        image of j that meets it).
     moment_i, moment_j : (3,) arrays
         Moments of the contact's tractions about i's and j's centroid (j's image), N m
         (``moment_j`` zero for a plate).
@@ -2009,10 +2010,14 @@ def _result(problem: _Problem, ev: _Evaluation, worst: float, passes: int, solve
             i = key[0]
             flip = roles[0] != i                  # i is body b
             sign = -1.0 if flip else 1.0
+            # the solved contact lies where its body a is; seen from i, near i: when i is body
+            # b, placed at the image c_i − image L that meets a (key: c_j + image L meets c_i),
+            # the point moves by image L
+            point = s.pressure_centroid + (_shift(key[2], problem.box) if flip else 0.0)
             reports.append(ContactReport(
                 key=key, i=i, j=key[1], normal=sign * s.normal, force=sign * s.force_on_a,
                 normal_force=s.normal_force, tangential_force=sign * s.tangential_force,
-                point=s.pressure_centroid, moment_i=s.moment_b if flip else s.moment_a,
+                point=point, moment_i=s.moment_b if flip else s.moment_a,
                 moment_j=s.moment_a if flip else s.moment_b, approach=s.approach,
                 area=s.area, stick_area=s.stick_area, spots=s.spots, slip=sign * s.slip,
                 shift_increment=sign * s.shift_increment, sliding=sliding,
