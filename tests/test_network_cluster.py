@@ -500,6 +500,26 @@ def check_pair_moments(pair, ci, cj):
     assert pair.moment_j == pytest.approx(arm_j, abs=1e-3 * R * F)
 
 
+def test_a_contact_past_the_half_space_limit_warns_and_a_particle_nothing_touches_is_free():
+    """A sphere pressed by 2 N (Hertz: a/R = 0.129 at each plate, past HALF_SPACE_LIMIT = 0.1)
+    beside a smaller one that the plate does not reach: the pressed sphere's contacts warn,
+    naming the contact and its a/R; the other is "free"."""
+    from thirdbody.network.cluster import HalfSpaceWarning
+
+    a = (3 * 2 * F * R / (4 * E_STAR)) ** (1 / 3)
+    bodies = [sphere(0.0, R), Body(Sphere(0.5 * R), MAT, centre=(5 * R, 0.0, 0.5 * R))]
+    with pytest.warns(HalfSpaceWarning) as caught:
+        result = solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=0.5, force=2 * F,
+                               numerics=COARSE)
+    texts = sorted(str(w.message) for w in caught)
+    assert len(texts) == 2 and "contact (0, 'lower')" in texts[0]
+    assert "contact (0, 'upper')" in texts[1]
+    for text in texts:
+        ratio = float(text.split("= ")[1].split(" >")[0])
+        assert ratio == pytest.approx(a / R, rel=0.06) and "> 0.1:" in text
+    assert result.kinematics == ("stick", "free")
+
+
 def test_a_particle_whose_every_contact_slides_is_said_to_slide():
     """The column of two spheres without friction: every contact, plate and pair, slides (a
     frictionless contact always does), so both particles "slide"; with μ = 0.3 they stick."""
