@@ -1063,4 +1063,13 @@ def test_the_bundled_shear_layer_example_starts_rolling_without_slip():
     dh = float(ds.plate_gap[k] - ds.plate_gap[k - 1])
     stored = float(ds.elastic_energy[k] - ds.elastic_energy[k - 1]) / load.force
     assert 0.5 * (mu[k] + mu[k - 1]) * ds_step == pytest.approx(dh + stored, rel=0.1)
+    # the rotation figure counts the turns from the end of the compression (the potatoes
+    # turned while pressed: from step 0 on they would not start at 0), forwards as they roll
+    from thirdbody import plot
+
+    along, turns, _ = plot.rolling_turns(ds)
+    assert along == pytest.approx([0.0, increment, 2 * increment], abs=1e-15)
+    assert (turns[0] == 0).all() and (turns[-1][pressed[-1]] > 0).all()
+    compression = ds.rotation_angle.values[1:load.compress_steps]
+    assert compression.max() > 1e-3                    # they did turn while pressed
     assert np.abs(ds.energy_residual.values[slid]).max() < 0.01
