@@ -39,6 +39,7 @@ import warnings
 import numpy as np
 
 import thirdbody as tb
+from _progress import slide_progress
 from thirdbody.shapes import Sphere
 
 R = 1e-3                        # m
@@ -87,23 +88,20 @@ def main(argv: list[str] | None = None) -> None:
                        compress_steps=3)
     sim = tb.Simulation(two_layers(n), tb.Plates(0.5), program, mu_pp=args.mu_pp,
                         resolution=20, network_tol=args.tol, network_cutbacks=4)
-    start = time.perf_counter()
+    def extra(v: dict) -> str:
+        rise = v.get("dilatancy", np.nan)
+        return (f", gap {v.get('plate_gap', np.nan) * 1e3:.6f} mm, dilatancy {rise * 1e6:.4g} um "
+                f"(rolling over the bottom pairs: mu_eff "
+                f"{mu_rolling(rise) if rise >= 0 else np.nan:.5g}), "
+                f"energy residual {v.get('energy_residual', np.nan):.2e}")
 
-    def progress(record) -> None:
-        v = record.values
-        print(f"step {record.step:3d}: {time.perf_counter() - start:6.0f} s, "
-              f"{v.get('network_iterations')} passes, {v.get('network_substeps')} sub-steps, "
-              f"gap {v.get('plate_gap', np.nan) * 1e3:.6f} mm, "
-              f"mu_eff {v.get('mu_eff_sliding', np.nan):.5g}, "
-              f"dilatancy {v.get('dilatancy', np.nan) * 1e6:.4g} um (rolling over the "
-              f"bottom pairs: mu_eff {mu_rolling(max(v.get('dilatancy', 0.0), 0.0)):.5g}), "
-              f"energy residual {v.get('energy_residual', np.nan):.2e}", flush=True)
+    progress = slide_progress(extra)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ds = sim.run(progress=progress)
     print(f"{2 * n * n} spheres in two layers, mu_pp {args.mu_pp}: {sim.status}, "
-          f"{time.perf_counter() - start:.0f} s wall")
+          f"{time.perf_counter() - progress.start:.0f} s wall")
     if args.out:
         from thirdbody.io.results import write_results
 

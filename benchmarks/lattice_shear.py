@@ -18,9 +18,8 @@ import argparse
 import time
 import warnings
 
-import numpy as np
-
 import thirdbody as tb
+from _progress import slide_progress
 from cluster_lattice import MATERIAL, lattice
 from thirdbody.shapes import Sphere
 
@@ -43,19 +42,12 @@ def main(argv: list[str] | None = None) -> None:
                        compress_steps=5)
     sim = tb.Simulation(layer, tb.Plates(0.3), program, mu_pp=0.3, resolution=20,
                         network_tol=1e-5, network_cutbacks=args.cutbacks)
-    start = time.perf_counter()
-
-    def progress(record) -> None:
-        values = record.values
-        print(f"step {record.step:3d}: {time.perf_counter() - start:6.0f} s, "
-              f"{values.get('network_iterations')} passes, "
-              f"{values.get('network_substeps')} sub-steps, "
-              f"mu_eff {values.get('mu_eff_sliding', np.nan):.6g}", flush=True)
+    progress = slide_progress()
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim.run(progress=progress)
-    print(f"{n * n} spheres: {sim.status}, {time.perf_counter() - start:.0f} s wall")
+    print(f"{n * n} spheres: {sim.status}, {time.perf_counter() - progress.start:.0f} s wall")
 
 
 if __name__ == "__main__":
