@@ -491,9 +491,7 @@ def check_pair_moments(pair, ci, cj):
     span = np.linalg.norm(cj - ci)
     assert np.linalg.norm(pair.point - ci) + np.linalg.norm(pair.point - cj) == pytest.approx(
         span, abs=1e-5 * R)
-    # (the line of centres to 8e-5 rad here: the spheres drift sideways along a neutral mode
-    # by 0.1 µm, and the contact reported is the last evaluated one)
-    assert pair.normal == pytest.approx((cj - ci) / np.linalg.norm(cj - ci), abs=2e-4)
+    assert pair.normal == pytest.approx((cj - ci) / np.linalg.norm(cj - ci), abs=1e-9)
     arm_i, arm_j = np.cross(pair.point - ci, pair.force), np.cross(pair.point - cj, -pair.force)
     assert np.linalg.norm(arm_i - arm_j) > 0.05 * R * pair.normal_force   # they differ
     assert pair.moment_i == pytest.approx(arm_i, abs=1e-3 * R * F)
