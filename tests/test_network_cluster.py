@@ -808,11 +808,34 @@ def test_bad_input_names_the_argument(kwargs, match):
         solve_cluster([sphere(0.0, R)], numerics=COARSE, **kwargs)
 
 
-def test_bad_numerics_name_the_field():
-    with pytest.raises(ValueError, match="max_iterations"):
-        ClusterNumerics(max_iterations=0)
-    with pytest.raises(ValueError, match="tol"):
-        ClusterNumerics(tol=-1.0)
+@pytest.mark.parametrize("name", ["resolution", "tol", "solver_tol", "radius", "min_radius",
+                                  "stick_rotation", "half_space_limit"])
+@pytest.mark.parametrize("value", [0, 0.0, -1e-3, math.inf, math.nan, "1", True, None])
+def test_bad_numerics_name_the_field(name, value):
+    """Every positive field refuses zero, negatives, inf, NaN, text, a boolean and None,
+    naming itself and the range; a good value passes."""
+    with pytest.raises(ValueError, match=rf"ClusterNumerics\.{name} must be a finite number > 0"):
+        ClusterNumerics(**{name: value})
+    assert getattr(ClusterNumerics(**{name: 0.5}), name) == 0.5
+
+
+@pytest.mark.parametrize("value", [0, -1, 1.5, True, "3"])
+def test_bad_iteration_budgets_name_the_field(value):
+    with pytest.raises(ValueError, match=r"ClusterNumerics\.max_iterations must be an integer"):
+        ClusterNumerics(max_iterations=value)
+    assert ClusterNumerics(max_iterations=1).max_iterations == 1
+
+
+@pytest.mark.parametrize("cell_size", [[1e-5, 2e-5, 3e-5], [1e-5, -1e-5], [0.0], [math.nan],
+                                       [[1e-5, 1e-5]]])
+def test_bad_cell_sizes_name_the_field(cell_size):
+    """cell_size: one size, or one per particle, each finite and > 0 (m)."""
+    bodies = [sphere(0.0, R), sphere(3 * R, R)]
+    with pytest.raises(ValueError, match=r"ClusterNumerics\.cell_size must be one size or one"):
+        ClusterNumerics(cell_size=cell_size).cells(bodies)
+    assert ClusterNumerics(cell_size=2e-5).cells(bodies) == [2e-5, 2e-5]
+    assert ClusterNumerics(cell_size=[1e-5, 2e-5]).cells(bodies) == [1e-5, 2e-5]
+    assert ClusterNumerics(resolution=25).cells(bodies) == [R / 25, R / 25]
 
 
 def test_no_convergence_raises_rather_than_returns():

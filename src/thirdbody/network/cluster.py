@@ -160,10 +160,12 @@ class ClusterNumerics:
         for name in ("resolution", "tol", "solver_tol", "radius", "min_radius",
                      "stick_rotation", "half_space_limit"):
             value = getattr(self, name)
-            if not (isinstance(value, int | float) and math.isfinite(value) and value > 0):
+            if not (isinstance(value, int | float) and not isinstance(value, bool)
+                    and math.isfinite(value) and value > 0):
                 raise ValueError(f"ClusterNumerics.{name} must be a finite number > 0, got "
                                  f"{value!r}")
-        if not (isinstance(self.max_iterations, int) and self.max_iterations >= 1):
+        if not (isinstance(self.max_iterations, int) and not isinstance(self.max_iterations, bool)
+                and self.max_iterations >= 1):
             raise ValueError(f"ClusterNumerics.max_iterations must be an integer >= 1, got "
                              f"{self.max_iterations!r}")
 
