@@ -445,7 +445,8 @@ def test_a_bad_network_table_names_the_key(network, match):
 @pytest.mark.parametrize("kwargs, match", [
     ({"box": (1e-2, 1e-2)}, r"box \(network.box\) needs mu_pp"),
     ({"network_energy_tol": 0.01}, r"network_energy_tol \(network.energy_tol\) needs mu_pp"),
-    ({"mu_pp": 0.3, "network_energy_tol": 0.0}, r"network_energy_tol .* \(0, inf\)"),
+    ({"mu_pp": 0.3, "network_energy_tol": 0.0}, r"network_energy_tol .* \(0, 1\)"),
+    ({"mu_pp": 0.3, "network_energy_tol": 1.0}, r"network_energy_tol .* \(0, 1\)"),
     ({"mu_pp": -1.0}, r"mu_pp .* \[0, inf\)"),
     ({"mu_pp": 0.3, "box": (1e-2, -1.0)}, r"box \(network.box, m\)"),
     ({"mu_pp": 0.3, "coupling": True}, r"coupling .* mu_pp"),

@@ -306,14 +306,20 @@ def test_permuting_the_particles_of_a_sliding_row_permutes_its_results_bit_for_b
 
 # A layer two grains thick (benchmarks/gouge.py): a 2 x 2 square bottom layer of spheres and a
 # 2 x 2 top layer in its pockets (PlacedParticle z), periodic, 0.5 N per top sphere, slid 3 x 2 µm
-def _gouge(mu_pp, steps=3, tol=1e-4):
+def _gouge_module():
+    """benchmarks/gouge.py (the packing and its rigid reference)."""
+    import importlib
     import sys
     from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from gouge import two_layers
+    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
+    return importlib.import_module("gouge")
 
-    return run(two_layers(2), tb.Plates(0.5),
+
+def _gouge(mu_pp, steps=3, tol=1e-4):
+    return run(_gouge_module().two_layers(2), tb.Plates(0.5),
                tb.Slide(force=2.0, distance=6e-6 * steps / 3, steps=steps, compress_steps=3),
                mu_pp=mu_pp, network_tol=tol, network_cutbacks=4)
 
@@ -361,12 +367,7 @@ def test_a_layer_two_grains_thick_locks_and_its_top_grains_roll_over_the_bottom_
     18 µm on, falling from 0.2920 as it climbs). tol 3e-3: at 1e-3 the first sliding step
     stalls at 1.5e-3 for this program and converges for the same 2 µm steps of a 20 µm one
     (rounding decides, as in network.md's robustness notes). About 60 s."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from gouge import mu_rolling
-
+    mu_rolling = _gouge_module().mu_rolling
     ds = _gouge(0.6, steps=14, tol=3e-3)
     locked = slice(3 + 9, None)                         # from 18 µm of sliding on
     mu = ds.mu_eff_sliding.values[locked]

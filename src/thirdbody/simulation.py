@@ -267,8 +267,9 @@ class Simulation:
                 raise ValueError(f"network_cutbacks (network.cutbacks) must be an integer in "
                                  f"[0, 8], got {network_cutbacks!r}")
             self.network_cutbacks = int(network_cutbacks)
-            self.network_energy_tol = None if network_energy_tol is None else positive(
-                "network_energy_tol (network.energy_tol)", network_energy_tol)
+            self.network_energy_tol = None if network_energy_tol is None else real(
+                "network_energy_tol (network.energy_tol)", network_energy_tol, "(0, 1)",
+                lambda x: 0 < x < 1)
             if coupling:
                 raise ValueError("coupling (numerics.coupling) is not available with mu_pp "
                                  "(network.mu_pp): the network's contacts are uncoupled")

@@ -316,8 +316,6 @@ class NetworkEngine:
         self.cutbacks = int(cutbacks)
         self.energy_tol = energy_tol
         self.d0 = d0
-        # each particle's height at rest: the gap at which the upper plate first touches it
-        self.tops = [p.top for p in layer]
         self.box = None if box is None else (float(box[0]), float(box[1]))
         # the cluster's coordinates: the layer's, moved so that a box starts at the origin
         self.origin = np.zeros(3) if self.box is None else np.array(
@@ -473,7 +471,8 @@ class NetworkEngine:
         gap0 = self.d0 if state.gap is None else state.gap
         move = np.array([*step.shift, result.gap - gap0], dtype=float)
         if state.gap is None:
-            work = math.fsum(_FROM_TOUCH * float(h.solved.force[2]) * (result.gap - self.tops[i])
+            work = math.fsum(_FROM_TOUCH * float(h.solved.force[2])
+                             * (result.gap - self.layer[i].top)
                              for (i, side, *_), h in result.histories.items()
                              if side == "upper")
         else:
