@@ -730,6 +730,16 @@ def test_an_energy_tolerance_cuts_the_steps_whose_balance_does_not_close(flat_ru
                       mu_pp=0.3, network_energy_tol=-0.01)
 
 
+def test_an_energy_tolerance_cuts_no_deeper_than_cutbacks():
+    """A tolerance no step meets (1e-12) with network_cutbacks = 1: every step after the first
+    is cut into exactly two halves, whose balance is then kept as it is (not cut again)."""
+    ds = run(tb.Particle(Ellipsoid((A, B, C)), MAT), tb.Plates(MU_UP, MU_LOW),
+             tb.Slide(force=F, distance=2 * FLAT_STEP, steps=2, compress_steps=1),
+             network_energy_tol=1e-12, network_cutbacks=1)
+    assert list(ds.network_substeps.values) == [1, 2, 2]
+    assert np.abs(ds.energy_residual.values[1:]).max() > 1e-12
+
+
 def test_a_first_step_that_reaches_a_second_particle_counts_each_from_its_own_touch():
     """Two spheres apart, of radii 1 and 0.995 mm, pressed by 2 N in one step from rest: the
     plate touches the taller one at h = 2 mm and the other at 1.99 mm. The work is Σ ⅖ f_i
