@@ -397,8 +397,8 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("contact_state", "contact", "1", "stick (some cells stick) or slide", dtype="int8",
        flags=CONTACT_STATES, fill="slide"),
     _v("contact_half_space_ratio", "contact", "1",
-       "contact radius over the smallest radius of curvature of the two surfaces (the "
-       "half-space approximation's measure)"),
+       "contact radius (its largest spot's) over the smallest radius of curvature of the two "
+       "surfaces where that spot sits (the half-space approximation's measure)"),
     _v("contact_mu", "contact", "1", "friction coefficient of the contact"),
     _v("contact_elastic_energy", "contact", "J", "elastic energy stored in the contact at the "
                                                  "end of the step"),

@@ -115,11 +115,16 @@ class PlateContact:
     contact_radius : float
         √(A/π) with A the largest spot's area, m.
     radii : (2,) array
-        Principal radii of curvature of the particle's surface at the pressure centroid, m.
+        Principal radii of curvature of the particle's surface at the pressure centroid, m
+        (the rolling geometry of the contact as a whole: the Newton model's).
     curvature : (2, 2) array
         Its curvature tensor (1/m, positive convex) on the world x, y axes.
     curvature_radius, half_space_ratio : float
-        The smallest |radius| and contact_radius / curvature_radius.
+        The smallest |radius| of curvature at the largest spot's own pressure centroid, m, and
+        contact_radius / curvature_radius (the half-space measure: each spot is a contact of
+        its own bump). With one spot that is the pressure centroid; with several the whole
+        contact's centroid can lie between them, where the surface may be concave (two bumps:
+        a/R 0.167 from the dip, 0.069 from a bump).
     shift : (2,) array
         The plate's accumulated rigid tangential displacement relative to the particle, m.
     shift_increment : (2,) array
@@ -250,6 +255,14 @@ def _curvature(body: Body, side: str, point: np.ndarray, size: float) -> np.ndar
         h *= 0.25
     raise RuntimeError(f"{side} plate: the particle's surface could not be sampled at the "
                        "contact")
+
+
+def _radii(curvature: np.ndarray) -> np.ndarray:
+    """Principal radii of curvature (m, signed: positive convex, inf where flat) of a
+    curvature tensor (1/m)."""
+    kappa = np.linalg.eigvalsh(curvature)
+    with np.errstate(divide="ignore"):
+        return np.where(kappa != 0, 1.0 / np.where(kappa != 0, kappa, 1.0), np.inf)
 
 
 def _touch(body: Body, side: str, plate: float) -> np.ndarray:
@@ -410,13 +423,18 @@ def _result(body, side, plate, window, normal, tangential, lever, increment, twi
     twist_moment = float(n[2]) * math.fsum(((X - lever[0]) * f[..., 1]
                                             - (Y - lever[1]) * f[..., 0]).ravel())
     labels, spots = ndimage.label(normal.contact, structure=np.ones((3, 3), dtype=bool))
-    largest = int(np.bincount(labels.ravel())[1:].max()) * dA
-    radius = math.sqrt(largest / math.pi)
+    counts = np.bincount(labels.ravel())[1:]
+    radius = math.sqrt(int(counts.max()) * dA / math.pi)
     curvature = _curvature(body, side, lever[:2], body.size)
-    kappa = np.linalg.eigvalsh(curvature)
-    with np.errstate(divide="ignore"):
-        radii = np.where(kappa != 0, 1.0 / np.where(kappa != 0, kappa, 1.0), np.inf)
-    curvature_radius = float(np.abs(radii).min())
+    radii = _radii(curvature)
+    if spots > 1:
+        # the largest spot's own pressure centroid (the first of equal ones)
+        w = np.where(labels == int(np.argmax(counts)) + 1, p, 0.0)
+        own = np.array([math.fsum((w * X).ravel()), math.fsum((w * Y).ravel())]) \
+            / math.fsum(w.ravel())
+        curvature_radius = float(np.abs(_radii(_curvature(body, side, own, body.size))).min())
+    else:
+        curvature_radius = float(np.abs(radii).min())
     ratio = radius / curvature_radius
     if ratio > limit:
         warnings.warn(HalfSpaceWarning(
