@@ -391,3 +391,48 @@ def test_the_damped_step_leaves_modes_without_stiffness_alone():
     assert 0 < np.linalg.norm(scaled) < 1e-6 * np.linalg.norm(np.linalg.solve(J, b))
     assert scaled @ gradient == pytest.approx(np.linalg.norm(scaled) * np.linalg.norm(gradient),
                                               rel=1e-6)
+
+
+def open_contact(roles, sigma, mu, radius=2e-3, E_star=3e9, compliance=4e-9):
+    """An open contact of the Newton model (normal +z, at the origin; centres 1 mm below and
+    above)."""
+    return cluster._Potential(roles, sigma, np.array([0.0, 0.0, 1.0]), np.zeros(3),
+                              np.array([0.0, 0.0, -1e-3]), np.array([0.0, 0.0, 1e-3]), E_star,
+                              radius, compliance, mu)
+
+
+@pytest.mark.parametrize(("scale", "force", "used"), [(0.5, 5.0, 0.5), (0.0, 5.0, 5.0)])
+def test_an_open_contact_is_a_spring_of_hertz_stiffness_at_the_force_scale(scale, force, used):
+    """Each open contact enters the model as a spring with Hertz's tangent stiffness at the
+    force scale N (the mean contact force, or F_N when nothing touches yet): δ = (9 N² /
+    (16 E*² R))^(1/3), k = 3N/(2δ), and Mindlin's k₀ = 8 √(Rδ)/C (C the pair's compliance
+    Σ (2 − ν)/G) with friction, none without; its separation σ and Hertz approach (``reach``)
+    are kept, its force on a is −N n with N = −k σ (the spring must first close by σ), on b
+    the opposite, and a plate is particle −1, flagged when it is the upper one. Numbers chosen
+    so that no factor of the formulas cancels (a force scale below 1 N, E* of 3 GPa)."""
+    R, E, C = 2e-3, 3e9, 4e-9                     # radius m, E* Pa, compliance 1/Pa
+    potential = [open_contact((0, "upper"), 3e-7, 0.4, R, E, C),
+                 open_contact((1, 2), 5e-7, 0.0, R, E, C)]
+    ev = NS(scale=scale, contacts=[], potential=potential)
+    terms = cluster._terms(NS(force=force), ev)
+    delta = (9 * used**2 / (16 * E**2 * R)) ** (1 / 3)
+    k = 1.5 * used / delta
+    assert terms.a.tolist() == [0, 1] and terms.b.tolist() == [-1, 2]
+    assert terms.upper.tolist() == [True, False]
+    assert not terms.bem.any()
+    assert terms.kn == pytest.approx([k, k], rel=1e-13)
+    assert terms.reach == pytest.approx([delta, delta], rel=1e-13)
+    assert terms.sigma.tolist() == [3e-7, 5e-7]
+    assert terms.N.tolist() == [0.0, 0.0]
+    assert terms.models.k_stick == pytest.approx([8 * math.sqrt(R * delta) / C, 0.0],
+                                                 rel=1e-13)
+    expected = np.array([[0.0, 0.0, k * 3e-7], [0.0, 0.0, k * 5e-7]])
+    assert terms.wrench_a[:, :3] == pytest.approx(expected, rel=1e-13)
+    assert terms.wrench_b[:, :3] == pytest.approx(-expected, rel=1e-13)
+
+
+def test_without_a_force_scale_no_open_contact_enters_the_model():
+    """Under gap control with nothing touching there is no force scale: the open contacts are
+    left out (nothing to size their springs by)."""
+    ev = NS(scale=0.0, contacts=[], potential=[open_contact((0, "lower"), 1e-7, 0.3)])
+    assert len(cluster._terms(NS(force=None), ev)) == 0
