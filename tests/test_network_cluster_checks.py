@@ -393,12 +393,17 @@ def test_the_damped_step_leaves_modes_without_stiffness_alone():
                                               rel=1e-6)
 
 
+#: an open contact's point (m) and the centres of its bodies a and b (m): off the line of the
+#: centres, so that its force has a moment about each
+POINT, CENTRE_A, CENTRE_B = (np.array([2e-4, -1e-4, 0.0]), np.array([0.0, 0.0, -1e-3]),
+                             np.array([-3e-4, 0.0, 1e-3]))
+
+
 def open_contact(roles, sigma, mu, radius=2e-3, E_star=3e9, compliance=4e-9):
-    """An open contact of the Newton model (normal +z, at the origin; centres 1 mm below and
-    above)."""
-    return cluster._Potential(roles, sigma, np.array([0.0, 0.0, 1.0]), np.zeros(3),
-                              np.array([0.0, 0.0, -1e-3]), np.array([0.0, 0.0, 1e-3]), E_star,
-                              radius, compliance, mu)
+    """An open contact of the Newton model (normal +z at POINT, between CENTRE_A and
+    CENTRE_B)."""
+    return cluster._Potential(roles, sigma, np.array([0.0, 0.0, 1.0]), POINT, CENTRE_A,
+                              CENTRE_B, E_star, radius, compliance, mu)
 
 
 @pytest.mark.parametrize(("scale", "force", "used"), [(0.5, 5.0, 0.5), (0.0, 5.0, 5.0)])
@@ -429,6 +434,13 @@ def test_an_open_contact_is_a_spring_of_hertz_stiffness_at_the_force_scale(scale
     expected = np.array([[0.0, 0.0, k * 3e-7], [0.0, 0.0, k * 5e-7]])
     assert terms.wrench_a[:, :3] == pytest.approx(expected, rel=1e-13)
     assert terms.wrench_b[:, :3] == pytest.approx(-expected, rel=1e-13)
+    # moments about each body's centre: (point − centre) × force, by hand for f = (0, 0, f_z)
+    for row, fz in zip((0, 1), expected[:, 2], strict=True):
+        for wrench, centre, sign in ((terms.wrench_a, CENTRE_A, 1.0),
+                                     (terms.wrench_b, CENTRE_B, -1.0)):
+            arm = POINT - centre
+            by_hand = sign * np.array([arm[1] * fz, -arm[0] * fz, 0.0])
+            assert wrench[row, 3:] == pytest.approx(by_hand, rel=1e-13, abs=1e-30)
 
 
 def test_without_a_force_scale_no_open_contact_enters_the_model():
