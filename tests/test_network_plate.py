@@ -87,3 +87,43 @@ def test_a_one_spot_plate_contact_measures_at_its_pressure_centroid():
     assert c.curvature_radius == pytest.approx(1e-3, rel=1e-6)
     assert np.abs(c.radii).min() == c.curvature_radius
     assert c.half_space_ratio == pytest.approx(math.sqrt(2e-6 * 1e-3) / 1e-3, rel=0.05)
+
+
+def test_a_step_left_with_contacts_below_a_cell_says_so():
+    """The two-bump potato alone between the plates, 0.002 N, at 40 cells per size (22 µm): its
+    bump tops lie between the centroid lattice's cell centres, the first Newton move leaves both
+    plates 1.8e-7 m into the shape, less than the sag to the nearest cell, and no cell touches.
+    The error says that (and what resolves it) instead of an infinite residual; at 80 cells
+    the step converges, with the load on two equal spots at each plate (the symmetry)."""
+    from thirdbody.network.cluster import ClusterConvergenceError, ClusterNumerics, solve_cluster
+
+    shape = two_bumps()
+    lowest = float(shape.lowest_point(Body(shape, MAT, centre=(0, 0, 0)).rotation)[2])
+    body = Body(shape, MAT, centre=(0.0, 0.0, -lowest))
+    with pytest.raises(ClusterConvergenceError,
+                       match=r"nothing carries F_N = 0.002 N: the particles overlap the plates "
+                             r"\(by up to .* m\), but by less than .*\(numerics\.resolution\)"):
+        solve_cluster([body], mu_up=0.3, mu_low=0.3, force=0.002,
+                      numerics=ClusterNumerics(resolution=40, tol=1e-5))
+    result = solve_cluster([body], mu_up=0.3, mu_low=0.3, force=0.002,
+                           numerics=ClusterNumerics(resolution=80, tol=1e-5))
+    for c in result.contacts:
+        assert c.spots == 2
+        assert c.normal_force == pytest.approx(0.002, rel=1e-5)
+
+
+def test_plates_that_left_every_particle_are_named():
+    """The end of that error when nothing overlaps a plate any more, and when something does
+    (a sphere of 1 mm between plates 5 mm apart; 0.1 mm into the lower one)."""
+    from types import SimpleNamespace as NS
+
+    from thirdbody.network import cluster
+
+    def problem(z):
+        return NS(n=1, body=lambda k, c, r: Body(Sphere(1e-3), MAT, centre=(0.0, 0.0, z)))
+
+    ev = NS(centres=None, rotations=None, h=5e-3)
+    assert cluster._why_nothing_touches(problem(2e-3), ev) == \
+        ": the plates have moved off every particle"
+    assert "overlap the plates (by up to 0.0001 m)" in cluster._why_nothing_touches(
+        problem(0.9e-3), ev)

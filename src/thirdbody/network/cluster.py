@@ -1912,14 +1912,36 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
     done, worst = _converged(problem, ev, numerics.tol)
     if done:
         return _result(problem, ev, worst, len(log), solves, log)
+    problem.failed = (len(log), solves)
+    if not ev.contacts and problem.force is not None:
+        raise ClusterConvergenceError(
+            f"cluster equilibrium did not converge in {len(log)} passes: at the last poses "
+            f"nothing carries F_N = {problem.force:.4g} N{_why_nothing_touches(problem, ev)}")
     k = int(np.argmax(np.abs(_scaled(problem, *_residual_vector(problem, ev), ev.scale or 1.0
                                      )[0]).max(axis=1)))
-    problem.failed = (len(log), solves)
     raise ClusterConvergenceError(
         f"cluster equilibrium did not converge in {len(log)} passes: largest scaled residual "
         f"{worst:.3e} > tol {numerics.tol:.1e} (particle {problem.order[k]}: force "
         f"{np.linalg.norm(ev.forces[k]):.3e} N, moment {np.linalg.norm(ev.moments[k]):.3e} N m; "
         f"trust radius {radius:.1e} rad){_beyond_half_space(problem, ev)}")
+
+
+def _why_nothing_touches(problem: _Problem, ev: _Evaluation) -> str:
+    """The end of the error of a step left with no contact: whether the shapes still overlap a
+    plate (then each overlap is below the surface's sag between cell centres: a contact
+    smaller than a cell, or an extreme point between cells) or the plates have left them."""
+    overlap = 0.0
+    for k in range(problem.n):
+        body = problem.body(k, ev.centres, ev.rotations)
+        z = float(body.centre[2])
+        overlap = max(overlap, -(z + float(body.shape.lowest_point(body.rotation)[2])),
+                      z + float(body.shape.highest_point(body.rotation)[2]) - ev.h)
+    if overlap > 0:
+        return (f": the particles overlap the plates (by up to {overlap:.3g} m), but by less "
+                f"than the surface's sag from their extreme point to the nearest cell centre, "
+                f"so no cell touches (a contact smaller than a cell): more cells per particle "
+                f"size (numerics.resolution) or a larger load step resolves it")
+    return ": the plates have moved off every particle"
 
 
 def _strays(problem: _Problem, ev: _Evaluation, carried: np.ndarray | None) -> list[int]:
