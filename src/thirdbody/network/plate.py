@@ -123,8 +123,9 @@ class PlateContact:
         The smallest |radius| of curvature at the largest spot's own pressure centroid, m, and
         contact_radius / curvature_radius (the half-space measure: each spot is a contact of
         its own bump). With one spot that is the pressure centroid; with several the whole
-        contact's centroid can lie between them, where the surface may be concave (two bumps:
-        a/R 0.167 from the dip, 0.069 from a bump).
+        contact's centroid can lie between them, where the surface may be concave (the
+        two-bump potato of ``tests/test_network_plate.py`` pressed 1 µm: a/R 0.196 from the
+        dip between its spots, 0.082 from its bump).
     shift : (2,) array
         The plate's accumulated rigid tangential displacement relative to the particle, m.
     shift_increment : (2,) array
