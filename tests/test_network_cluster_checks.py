@@ -1,10 +1,12 @@
 """The network solver's measures of a state (:mod:`thirdbody.network.cluster`): the scaled
 residuals and the convergence test, the merit the trust region minimises, the first phase's
-force test, the stall test and the trust region's limit on a step, each on a state made up
-here with its answer worked out by hand from the documented definitions (a force over the
-force scale, a moment over the force scale times the particle's size, the plate's force error
-over F_N). Numbers are chosen so that each term is the largest in turn and no two quantities
-the code could confuse (a size and its inverse, the force scale and F_N) are equal."""
+force test, the stall test, the trust region's limit on a step, the open contacts' springs in
+the Newton model and the models' learning from a trial (Broyden's update of a particle's
+block), each on a state made up here with its answer worked out by hand from the documented
+definitions (a force over the force scale, a moment over the force scale times the particle's
+size, the plate's force error over F_N). Numbers are chosen so that each term is the largest
+in turn and no two quantities the code could confuse (a size and its inverse, the force scale
+and F_N) are equal."""
 
 import math
 from types import SimpleNamespace as NS
@@ -448,3 +450,124 @@ def test_without_a_force_scale_no_open_contact_enters_the_model():
     left out (nothing to size their springs by)."""
     ev = NS(scale=0.0, contacts=[], potential=[open_contact((0, "lower"), 1e-7, 0.3)])
     assert len(cluster._terms(NS(force=None), ev)) == 0
+
+
+class _Stack(NS):
+    """Made-up model terms: the solved contacts' particles and which are solved."""
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+
+def learning_case(*, slide=(False, False, False), after=None, rows=(True, True)):
+    """Two particles (sizes 1 and 4 mm): particle 0 on the lower plate, 1 under the upper one,
+    and a pair contact (0, 1) solved with 1 as a and 0 as b; a trial step whose residuals the
+    model mispredicted. Returns the arguments of ``_learn`` and its problem."""
+    keys = [(0, "lower"), (1, "upper"), (0, 1, (0, 0))]
+    contacts = [NS(key=k, model=NS(sliding=False)) for k in keys]
+    trial = [NS(key=k, model=NS(sliding=False)) for k in (keys if after is None else after)]
+    problem = NS(n=2, sizes=SIZES, correction={})
+    # the pair's roles (1, 0): particle 0 is its b
+    terms = _Stack(a=np.array([0, 1, 1]), b=np.array([-1, -1, 0]),
+                   bem=np.array([True, True, True]))
+    R = np.array([[0.1, 0.2, -0.3, 1e-4, 2e-4, 0.0], [0.0, -0.5, 0.4, 0.0, 3e-3, -1e-3]])
+    predicted = np.array([[0.05, 0.1, -0.1, 0.0, 1e-4, 0.0], [0.0, -0.2, 0.1, 0.0, 1e-3, 0.0]])
+    R_trial = np.array([[0.3, -0.1, 0.2, 2e-4, -1e-4, 5e-5], [0.2, 0.1, -0.3, 1e-3, 0.0, 2e-3]])
+    step = np.array([[1e-6, -2e-6, 0.5e-6, 1e-3, 0.0, -2e-3],
+                     [-3e-6, 1e-6, 2e-6, 0.0, 4e-4, 1e-4]])
+    args = (problem, NS(contacts=contacts), NS(contacts=trial), terms,
+            np.array([True, True, True]), NS(slide=np.array(slide)), R, R_trial, predicted,
+            step, np.array(rows))
+    return problem, args
+
+
+def broyden(k, R_trial, predicted, step):
+    """Broyden's good update of particle k's block in the scaled unknowns (du, L dφ), by hand:
+    (mismatch) (W s)ᵀ / (s · W s) with W = diag(1, 1, 1, L², L², L²)."""
+    W = np.array([1.0, 1.0, 1.0] + [SIZES[k] ** 2] * 3)
+    mismatch = R_trial[k] - predicted[k]
+    return np.outer(mismatch, W * step[k]) / float(step[k] @ (W * step[k]))
+
+
+def test_a_trial_the_model_mispredicted_corrects_each_particle_s_block_by_broyden():
+    """Both particles' predictions missed (by more than _BAD_MODEL of the change): each gets
+    Broyden's update of its own 6 x 6 block, and a second trial adds to it. (The learning
+    attempt's converged answers do not pin the update: only these definitions do.)"""
+    problem, args = learning_case()
+    R_trial, predicted, step = args[7], args[8], args[9]
+    assert cluster._learn(*args)
+    assert set(problem.correction) == {(0, 0), (1, 1)}
+    for k in (0, 1):
+        assert problem.correction[(k, k)] == pytest.approx(
+            broyden(k, R_trial, predicted, step), rel=1e-12)
+    assert cluster._learn(*args)
+    assert problem.correction[(1, 1)] == pytest.approx(
+        2 * broyden(1, R_trial, predicted, step), rel=1e-12)
+
+
+@pytest.mark.parametrize(("case", "learns"), [
+    # particle 1 converged: only 0 learns
+    ({"rows": (True, False)}, {0}),
+    # the pair contact slid in the trial, the model had it stick: neither of its particles
+    ({"slide": (False, False, True)}, set()),
+    # the lower contact is predicted to slide and it did not: particle 0 does not learn
+    ({"slide": (True, False, False)}, {1}),
+    # the trial lost the upper contact: particle 1's set changed
+    ({"after": [(0, "lower"), (0, 1, (0, 0))]}, {0}),
+])
+def test_a_particle_learns_only_from_a_trial_that_kept_its_contacts_and_their_states(case,
+                                                                                     learns):
+    problem, args = learning_case(**case)
+    assert cluster._learn(*args) == bool(learns)
+    assert {k for k, _ in problem.correction} == learns
+
+
+def test_a_changed_contact_set_drops_the_particle_s_correction():
+    """A correction learnt before is dropped when the particle's contacts change."""
+    problem, args = learning_case(after=[(0, "lower"), (0, 1, (0, 0))])
+    problem.correction[(1, 1)] = np.ones((6, 6))
+    problem.correction[(0, 0)] = np.ones((6, 6))
+    cluster._learn(*args)
+    assert (1, 1) not in problem.correction
+    assert (problem.correction[(0, 0)] != 1.0).any()        # kept, and updated
+
+
+@pytest.mark.parametrize(("miss", "learns"), [(0.0, set()), (0.99, set()), (1.01, {1})])
+def test_a_particle_whose_change_the_model_predicted_well_learns_nothing(miss, learns):
+    """Particle 0 predicted exactly; particle 1 missed by ``miss`` times _BAD_MODEL of its
+    change (scaled: forces, moments over the size): below 1, nothing to learn."""
+    problem, args = learning_case()
+    R, R_trial, predicted = args[6], args[7], args[8].copy()
+    predicted[0] = R_trial[0]
+    predicted[1] = R_trial[1] - miss * cluster._BAD_MODEL * (R_trial[1] - R[1])
+    assert cluster._learn(*args[:8], predicted, *args[9:]) == bool(learns)
+    assert {k for k, _ in problem.correction} == learns
+
+
+@pytest.mark.parametrize(("still", "learns"), [(0, {1}), (1, {0})])
+def test_a_particle_that_did_not_move_learns_nothing_and_the_others_still_do(still, learns):
+    """A particle whose step is zero has no direction to learn along (s · W s = 0); the
+    other particle's update goes on."""
+    problem, args = learning_case()
+    step = args[9].copy()
+    step[still] = 0.0
+    assert cluster._learn(*args[:9], step, *args[10:])
+    assert {k for k, _ in problem.correction} == learns
+
+
+def test_the_learning_threshold_weighs_moments_by_the_particle_s_size():
+    """The comparison of the miss with the change is in the scaled residuals (forces, moments
+    over the size): particle 1 (4 mm) missed only its moment about x, by 1.5 times the
+    threshold in the scaled norm, which the unscaled norm (moments in N m, 250 times smaller
+    here) would see as far below it."""
+    problem, args = learning_case()
+    R, R_trial, predicted = args[6], args[7], args[8].copy()
+    predicted[0] = R_trial[0]
+    scaled = np.array([1.0, 1.0, 1.0] + [1 / SIZES[1]] * 3)
+    threshold = cluster._BAD_MODEL * np.linalg.norm(scaled * (R_trial[1] - R[1]))
+    miss = np.zeros(6)
+    miss[3] = 1.5 * threshold * SIZES[1]             # a moment, N m
+    predicted[1] = R_trial[1] - miss
+    assert np.linalg.norm(miss) < cluster._BAD_MODEL * np.linalg.norm(R_trial[1] - R[1])
+    assert cluster._learn(*args[:8], predicted, *args[9:])
+    assert set(problem.correction) == {(1, 1)}
