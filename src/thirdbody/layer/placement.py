@@ -20,6 +20,7 @@ import itertools
 import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -72,7 +73,7 @@ class PlacedParticle:
                     f"got {self.z!r}")
             object.__setattr__(self, "z", max(z, rest))
 
-    @property
+    @cached_property
     def rest_height(self) -> float:
         """The centroid's height when the particle rests on the lower plate, m."""
         p = self.particle
@@ -83,7 +84,7 @@ class PlacedParticle:
         """The centroid's height above the lower plate, m (``z``, or resting)."""
         return self.rest_height if self.z is None else float(self.z)
 
-    @property
+    @cached_property
     def top(self) -> float:
         """The height of the particle's highest point above the lower plate, m: the gap at
         which the upper plate first touches it."""

@@ -575,10 +575,7 @@ class _Problem:
                     previous = self.histories.get(key)
                     previous = None if previous is None else previous[1]
                     fraction = 1.0
-                    extreme = (body.shape.lowest_point(body.rotation) if side == "lower"
-                               else body.shape.highest_point(body.rotation))
-                    depth = (-float(body.centre[2] + extreme[2]) if side == "lower"
-                             else float(body.centre[2] + extreme[2]) - h)
+                    depth, extreme = _plate_depth(body, side, h)
                     if depth <= 0:
                         point = body.centre + extreme
                         point[2] = plate
@@ -1926,16 +1923,22 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
         f"trust radius {radius:.1e} rad){_beyond_half_space(problem, ev)}")
 
 
+def _plate_depth(body: Body, side: str, h: float) -> tuple[float, np.ndarray]:
+    """(How far the rigid ``body`` reaches through the plate on ``side``, m (> 0: overlap),
+    its extreme point towards that plate relative to its centroid, m), the upper plate at
+    height ``h``."""
+    extreme = (body.shape.lowest_point(body.rotation) if side == "lower"
+               else body.shape.highest_point(body.rotation))
+    z = float(body.centre[2] + extreme[2])
+    return (-z if side == "lower" else z - h), extreme
+
+
 def _why_nothing_touches(problem: _Problem, ev: _Evaluation) -> str:
     """The end of the error of a step left with no contact: whether the shapes still overlap a
     plate (then each overlap is below the surface's sag between cell centres: a contact
     smaller than a cell, or an extreme point between cells) or the plates have left them."""
-    overlap = 0.0
-    for k in range(problem.n):
-        body = problem.body(k, ev.centres, ev.rotations)
-        z = float(body.centre[2])
-        overlap = max(overlap, -(z + float(body.shape.lowest_point(body.rotation)[2])),
-                      z + float(body.shape.highest_point(body.rotation)[2]) - ev.h)
+    bodies = [problem.body(k, ev.centres, ev.rotations) for k in range(problem.n)]
+    overlap = max(_plate_depth(b, side, ev.h)[0] for b in bodies for side in PLATES)
     if overlap > 0:
         return (f": the particles overlap the plates (by up to {overlap:.3g} m), but by less "
                 f"than the surface's sag from their extreme point to the nearest cell centre, "
