@@ -39,12 +39,13 @@ from thirdbody.network.cluster import ClusterNumerics, solve_cluster, wrap
 MU = 0.3
 
 
-def compress(bodies, side, loads, numerics, check):
+def compress(bodies, side, loads, numerics, check, mu=MU):
     """Force steps to each of ``loads`` (N, total), each from the last one's poses and
-    histories after :func:`wrap`; ``check(result, step)`` after each."""
+    histories after :func:`wrap`, friction ``mu`` everywhere; ``check(result, step)`` after
+    each."""
     histories, gap = {}, None
     for k, load in enumerate(loads):
-        result = solve_cluster(bodies, histories, mu_up=MU, mu_low=MU, mu_pp=MU, force=load,
+        result = solve_cluster(bodies, histories, mu_up=mu, mu_low=mu, mu_pp=mu, force=load,
                                gap_start=gap, box=(side, side), numerics=numerics)
         check(result, k)
         bodies, histories = wrap(result.bodies, result.histories, (side, side))
@@ -71,14 +72,16 @@ def overlaps(bodies, side, gap):
     return out
 
 
-def test_identical_pressed_spheres_compressed_in_three_steps_stay_hertzian_at_every_step():
+@pytest.mark.parametrize("mu", [MU, 0.0])
+def test_identical_pressed_spheres_compressed_in_three_steps_stay_hertzian_at_every_step(mu):
     """3 × 3 identical spheres pressed 0.1 % of 2R into each other, F_N/9 = 0.2, 0.35 and
     0.5 N each over three steps (60 cells per size, tol 1e-5). By symmetry the pair contacts
     stay horizontal and carry no vertical load, so at every step each plate contact carries
     F_N/9, the gap is 2R − 2 δ(F_N/9) with δ = (9 W²/(16 E*² R))^(1/3), and every pair keeps
     Hertz's load between two spheres at the overlap 2R·10⁻³ (the centres do not move
     sideways). Measured: the gap within 0.27 % of δ, the pair forces −1.0 % (both the grid's
-    error at 4 cells across the radius). The histories carried from step to step keep the
+    error at 4 cells across the radius). Frictionless too (μ = 0: the spheres' spins are free
+    modes the solve must leave alone). The histories carried from step to step keep the
     particles' tractions identical: every contact with the upper plate carries the same force to
     1e-9, and so does every contact with the lower plate and every pair."""
     n = 3
@@ -89,7 +92,7 @@ def test_identical_pressed_spheres_compressed_in_three_steps_stay_hertzian_at_ev
 
     def check(result, k):
         check_balanced(result)
-        check_contact_laws(result, MU)
+        check_contact_laws(result, mu)
         load = loads[k]
         assert result.normal_force == pytest.approx(n * n * load, rel=1e-5)
         for side_ in ("lower", "upper"):
@@ -107,7 +110,7 @@ def test_identical_pressed_spheres_compressed_in_three_steps_stay_hertzian_at_ev
         seen.append(result.gap)
 
     compress(bodies, side, [n * n * w for w in loads], ClusterNumerics(resolution=60, tol=1e-5),
-             check)
+             check, mu)
     assert len(seen) == 3 and seen[0] > seen[1] > seen[2]
 
 
