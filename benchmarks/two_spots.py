@@ -16,7 +16,8 @@ cases, each solved by ``solve_cluster`` under force control (μ = 0.3 everywhere
   of the deepest one (:mod:`thirdbody.network.contact`), so its normal leans by that angle
   and a vertical pair force needs a tangential force of tan(lean) N that the true contact
   (two normals, symmetric) does not. Printed: converged or not, passes, the pair normal's
-  lean, the pair force's tangential share, the sphere's sideways translation.
+  lean, how far the other spot faces from it (``spot_tilt``), the pair force's tangential
+  share, the sphere's sideways translation.
 
     .venv/bin/python benchmarks/two_spots.py plates --cells 40 80 160
     .venv/bin/python benchmarks/two_spots.py sphere --radius 1e-3 3e-3 --force 0.02 --cells 60
@@ -71,7 +72,9 @@ def solve(bodies, force: float, cells: float):
             result = solve_cluster(bodies, mu_up=MU, mu_low=MU, mu_pp=MU, force=force,
                                    numerics=ClusterNumerics(resolution=cells, tol=1e-5))
     except ClusterConvergenceError as exc:
-        return str(exc).split(";")[0], time.process_time() - cpu
+        parts = str(exc).split("; ")
+        return "; ".join(parts[:1] + [p for p in parts[1:] if "spot" in p]), \
+            time.process_time() - cpu
     return result, time.process_time() - cpu
 
 
@@ -109,7 +112,8 @@ def main(argv: list[str] | None = None) -> None:
             lean = math.degrees(math.atan2(math.hypot(*pair.normal[:2]), pair.normal[2]))
             share = float(np.linalg.norm(pair.tangential_force)) / pair.normal_force
             print(f"R = {radius * 1e3:g} mm, {cells:g} cells: {out.iterations} passes, pair "
-                  f"{pair.spots} spots, normal leaning {lean:.2f}°, |T|/N {share:.4f}, sphere "
+                  f"{pair.spots} spots, normal leaning {lean:.2f}°, second spot facing "
+                  f"{math.degrees(pair.spot_tilt):.2f}° away, |T|/N {share:.4f}, sphere "
                   f"moved {out.translation[1][0] * 1e9:+.2f} nm along x, {cpu:.1f} s",
                   flush=True)
 

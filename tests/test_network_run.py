@@ -306,7 +306,9 @@ def test_the_contact_table_holds_every_contact_with_newtons_third_law(row):
         z = 0.0 if j == -1 else ds.plate_gap.values[k]
         assert ds.contact_point.values[r] == pytest.approx([x, 0.0, z], abs=1e-9)
         assert float(ds.contact_total_area.values[r]) > 0
+        assert float(ds.contact_spot_tilt.values[r]) == 0.0      # a plate: every spot faces it
     assert ds.contact_state.attrs["flag_meanings"] == "stick slide"
+    assert ds.contact_spot_tilt.attrs["units"] == "degree"
 
 
 def test_particles_overlapping_through_a_side_of_the_box_are_refused():

@@ -399,6 +399,11 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("contact_half_space_ratio", "contact", "1",
        "contact radius (its largest spot's) over the smallest radius of curvature of the two "
        "surfaces where that spot sits (the half-space approximation's measure)"),
+    _v("contact_spot_tilt", "contact", "degree",
+       "largest angle between a spot's own normal and the contact's normal (0 for one spot "
+       "and for the plates): the spots of a pair contact share its frame, so a spot facing "
+       "elsewhere (a non-convex particle touching on two bumps) is solved along the wrong "
+       "normal; a warning is given past atan(half_space_limit)"),
     _v("contact_mu", "contact", "1", "friction coefficient of the contact"),
     _v("contact_elastic_energy", "contact", "J", "elastic energy stored in the contact at the "
                                                  "end of the step"),

@@ -244,6 +244,9 @@ class ContactReport:
     half_space_ratio : float
         Contact radius over the smallest radius of curvature.
     mu : float
+    spot_tilt : float
+        The largest angle between a spot's own normal and the contact's, rad (0 for one spot
+        and for a plate: :attr:`PairContact.spot_tilt`).
     """
 
     key: tuple
@@ -266,6 +269,7 @@ class ContactReport:
     state: str
     half_space_ratio: float
     mu: float
+    spot_tilt: float = 0.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -1977,15 +1981,24 @@ def _beyond_half_space(problem: _Problem, ev: _Evaluation) -> str:
     half-space limit (a/R, :data:`HALF_SPACE_LIMIT`): the step asks for more than the contact
     model holds, and that is the likelier cause than the iteration (the 53 potatoes' step to
     14 % compression pressed the tallest with 73 N, its plate contacts at a/R ≈ 0.4)."""
+    limit = problem.numerics.half_space_limit
     worst, where = 0.0, None
+    tilt, tilted = 0.0, None
     for c in ev.contacts:
         ratio = c.contact.half_space_ratio
         if ratio > worst:
             worst, where = ratio, problem.user_key(c.key)
-    if worst <= problem.numerics.half_space_limit:
-        return ""
-    return (f"; contact {where} has a/R = {worst:.2g} > {problem.numerics.half_space_limit:.2g}, "
-            f"out of the half-space model's range: lower the load or the compression")
+        spot = getattr(c.contact, "spot_tilt", 0.0)
+        if spot > tilt:
+            tilt, tilted = spot, problem.user_key(c.key)
+    out = ""
+    if worst > limit:
+        out += (f"; contact {where} has a/R = {worst:.2g} > {limit:.2g}, out of the "
+                f"half-space model's range: lower the load or the compression")
+    if math.tan(tilt) > limit:
+        out += (f"; contact {tilted} has a spot facing {math.degrees(tilt):.3g}° away from its "
+                f"normal: spots facing different ways (non-convex particles) are not modelled")
+    return out
 
 
 # --- the result ----------------------------------------------------------------------------
@@ -2049,8 +2062,14 @@ def _result(problem: _Problem, ev: _Evaluation, worst: float, passes: int, solve
                 area=s.area, stick_area=s.stick_area, spots=s.spots, slip=sign * s.slip,
                 shift_increment=sign * s.shift_increment, sliding=sliding,
                 state="slide" if sliding else "stick", half_space_ratio=s.half_space_ratio,
-                mu=s.mu))
+                mu=s.mu, spot_tilt=s.spot_tilt))
             ratio = s.half_space_ratio
+            if math.tan(s.spot_tilt) > numerics.half_space_limit:
+                warnings.warn(HalfSpaceWarning(
+                    f"contact {key}: a spot faces {math.degrees(s.spot_tilt):.3g}° away from "
+                    f"the contact's normal (tan > {numerics.half_space_limit:.3g}): its force "
+                    f"is taken along that normal, and friction carries the difference"),
+                    stacklevel=3)
         if ratio > numerics.half_space_limit:
             warnings.warn(HalfSpaceWarning(
                 f"contact {key}: contact radius / radius of curvature = {ratio:.3g} > "

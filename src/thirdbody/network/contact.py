@@ -72,7 +72,7 @@ from ..orientation import Rotation
 from ..particle.interface import Window, remap
 from .body import Body
 from .frame import pair_frame, smallest_rotation
-from .narrow import Approach, _smoothing, _stencil, closest_approach
+from .narrow import Approach, _local, _smoothing, _stencil, closest_approach
 from .window import Lattice, carry_field, ring, union, window_around, window_gap
 
 __all__ = ["HALF_SPACE_LIMIT", "HalfSpaceWarning", "PairContact", "solve_contact"]
@@ -148,6 +148,12 @@ class PairContact:
         The smallest |radius| of both, m.
     half_space_ratio : float
         contact_radius / curvature_radius.
+    spot_tilt : float
+        The largest angle between a spot's own common normal and :attr:`normal`, rad (0 for one
+        spot). Every spot is solved in the deepest one's frame, so a spot that faces elsewhere
+        (a non-convex body touching on two bumps) has its force taken along the wrong normal,
+        and friction carries the difference, about N tan(spot_tilt); past tan = the half-space
+        limit a :class:`HalfSpaceWarning` is emitted.
     shift : (2,) array
         Accumulated rigid tangential displacement of b relative to a, frame components, m.
     shift_increment : (3,) array
@@ -199,6 +205,7 @@ class PairContact:
     radii_b: np.ndarray
     curvature_radius: float
     half_space_ratio: float
+    spot_tilt: float
     shift: np.ndarray
     shift_increment: np.ndarray
     slip: np.ndarray
@@ -264,17 +271,67 @@ def _positive(value, name: str, unit: str) -> float:
     return x
 
 
-def _curvatures(a: Body, b: Body, frame, origin) -> tuple[np.ndarray, np.ndarray]:
-    """Hessians (1/m) of a's upper and b's lower surface heights at the frame origin."""
+def _surfaces_at(a: Body, b: Body, frame, origin):
+    """:func:`~thirdbody.network.narrow._stencil` of a's upper and b's lower surface about the
+    world point ``origin`` (the frame's axes), its step shrunk until every ray meets; None if
+    none does."""
     size = min(a.size, b.size)
     h = max(1e-3 * size, _smoothing(a), _smoothing(b))
     st = _stencil(a, b, frame, origin, h)
     while st is None and h > 1e-6 * size:
         h *= 0.25
         st = _stencil(a, b, frame, origin, h)
+    return st
+
+
+def _curvatures(a: Body, b: Body, frame, origin) -> tuple[np.ndarray, np.ndarray]:
+    """Hessians (1/m) of a's upper and b's lower surface heights at the frame origin."""
+    st = _surfaces_at(a, b, frame, origin)
     if st is None:
         raise RuntimeError("the surfaces could not be sampled at the closest points")
     return st[0][2], st[1][2]
+
+
+def _spot_tilt(a: Body, b: Body, frame, origin, n, X, Y, p, labels, spots: int) -> float:
+    """The largest angle (rad) between a spot's own common normal and the frame's.
+
+    A spot's own normal is the common normal of the surfaces' local closest points there: the
+    narrow phase's local search (:func:`~thirdbody.network.narrow._local`) started at the
+    spot's pressure centroid with the frame normal tilted by the surfaces' mean slope there
+    (atan|½(g_a + g_b)|, which is the tilt itself up to the centroid's offset of a fraction of
+    a cell). Where that search fails or ends nearer the frame origin than the spot, the slope's
+    estimate stands. The spot holding the closest points (the frame origin) faces the frame
+    normal by construction (0). One spot: 0. A spot whose surfaces cannot be sampled counts as
+    facing the frame normal."""
+    if spots < 2:
+        return 0.0
+    home = int(labels.ravel()[int(np.argmin((X * X + Y * Y).ravel()))])
+    t1, t2 = frame.inv().apply(np.eye(3)[:2])
+    worst = 0.0
+    for spot in range(1, spots + 1):
+        if spot == home:
+            continue
+        w = np.where(labels == spot, p, 0.0).ravel()
+        total = math.fsum(w)
+        if not total > 0:
+            continue
+        xc = math.fsum(w * X.ravel()) / total
+        yc = math.fsum(w * Y.ravel()) / total
+        point = origin + xc * t1 + yc * t2
+        st = _surfaces_at(a, b, frame, point)
+        if st is None:
+            continue
+        slope = 0.5 * (st[0][1] + st[1][1])
+        tilt = math.atan(float(np.hypot(*slope)))
+        guess = frame.inv().apply(np.array([-slope[0], -slope[1], 1.0]))
+        h = max(1e-3 * min(a.size, b.size), _smoothing(a), _smoothing(b))
+        found = _local(a, b, guess / np.linalg.norm(guess), point, h, 1e-10, 60)
+        if found is not None and found[4] and \
+                np.linalg.norm(found[1] - point) < np.linalg.norm(found[1] - origin):
+            own = found[0]
+            tilt = math.atan2(float(np.linalg.norm(np.cross(own, n))), float(own @ n))
+        worst = max(worst, tilt)
+    return worst
 
 
 def _radii(hessian: np.ndarray) -> np.ndarray:
@@ -575,8 +632,9 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
         floor = float(g.min())
         if floor < -1e-9 * lattice.spacing - 1e-12 * abs(lattice.zero):
             if not faceted:
+                jf, i_f = np.unravel_index(int(np.argmin(g)), g.shape)
                 raise RuntimeError(f"a cell lies {-floor:.3g} m below the closest approach: "
-                                   "the narrow phase missed a deeper minimum of the gap")
+                                   + _deeper_cell(lattice, i_f + corner[0], jf + corner[1]))
             lattice.lower_zero(-floor)
             if from_poses:
                 delta -= floor
@@ -618,6 +676,23 @@ def _solve_normal(lattice: Lattice, pair: ElasticPair, force: float | None,
             continue
         return normal
     raise RuntimeError("the contact window did not settle")   # pragma: no cover
+
+
+def _deeper_cell(lattice: Lattice, i: int, j: int) -> str:
+    """Why cell (i, j) of the lattice lies below the closest approach: a spot that faces away
+    from the contact's normal (two bumps of a non-convex body, each overlapping the other body,
+    one of them deeper along the frame's rays than along its own normal), or else a deeper
+    minimum of the gap that the narrow phase missed."""
+    t1, t2 = lattice.frame.inv().apply(np.eye(3)[:2])
+    point = lattice.origin + lattice.spacing * (i * t1 + j * t2)
+    st = _surfaces_at(lattice.a, lattice.b, lattice.frame, point)
+    if st is not None:
+        tilt = math.degrees(math.atan(float(np.hypot(*(0.5 * (st[0][1] + st[1][1]))))))
+        if tilt > 1.0:
+            return (f"there the surfaces face {tilt:.3g}° away from the contact's normal, a "
+                    f"second spot of a non-convex pair that one contact frame cannot hold "
+                    f"(spots facing different ways are not modelled)")
+    return "the narrow phase missed a deeper minimum of the gap"
 
 
 def _check_extent(normal: NormalContact, a: Body, b: Body) -> None:
@@ -666,6 +741,12 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
             f"contact radius / radius of curvature = {ratio:.3g} > {limit:.3g}: the half-space "
             f"model of the contact is out of its range (a = {radius:.3g} m, R = "
             f"{curvature:.3g} m)"), stacklevel=3)
+    tilt = _spot_tilt(a, b, frame, origin, n, X, Y, p, labels, spots)
+    if math.tan(tilt) > limit:
+        warnings.warn(HalfSpaceWarning(
+            f"a spot of the contact faces {math.degrees(tilt):.3g}° away from its normal "
+            f"(tan = {math.tan(tilt):.3g} > {limit:.3g}): its force is taken along the "
+            f"contact's normal, and friction carries the difference"), stacklevel=3)
     stick = np.zeros(grid.shape, dtype=bool) if tangential is None else tangential.stick
     slip = np.zeros(3)
     if tangential is not None and tangential.slip.any():
@@ -684,7 +765,7 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
         spots=int(spots),
         pressure_centroid=origin + xc * t1 + yc * t2, contact_radius=radius,
         radii_a=radii_a, radii_b=radii_b, curvature_radius=curvature,
-        half_space_ratio=ratio,
+        half_space_ratio=ratio, spot_tilt=tilt,
         shift=np.zeros(2) if tangential is None else np.asarray(tangential.shift, dtype=float),
         shift_increment=increment[0] * t1 + increment[1] * t2, slip=slip,
         twist_moment=twist_moment, curvature_a=-Ha, curvature_b=Hb, twist=twist, mu=mu,

@@ -609,6 +609,7 @@ class NetworkEngine:
             "contact_rolling_i": travel[0], "contact_rolling_j": travel[1],
             "contact_state": c.state,
             "contact_half_space_ratio": float(c.half_space_ratio),
+            "contact_spot_tilt": math.degrees(c.spot_tilt),
             "contact_mu": float(c.mu),
             "contact_elastic_energy": stored, "contact_dissipation": dissipated,
         }
