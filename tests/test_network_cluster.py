@@ -1223,11 +1223,25 @@ def test_a_convergence_error_names_a_contact_past_the_half_space_limit():
         return NS(contacts=[NS(key=(k, "lower"), contact=NS(half_space_ratio=r))
                             for k, r in enumerate(ratios)])
 
-    problem = NS(numerics=NS(half_space_limit=HALF_SPACE_LIMIT), user_key=lambda key: key)
+    problem = NS(numerics=NS(half_space_limit=HALF_SPACE_LIMIT), user_key=lambda key: key,
+                 beyond="")
     assert cluster._beyond_half_space(problem, ev(0.05, 0.09)) == ""
     assert cluster._beyond_half_space(problem, ev(0.0, HALF_SPACE_LIMIT)) == ""
+    assert problem.beyond == ""
     text = cluster._beyond_half_space(problem, ev(0.05, 0.42, 0.2))
     assert "(1, 'lower')" in text and "a/R = 0.42" in text and "half-space" in text
+    assert problem.beyond == text                   # kept for the first attempt's error
+    # a pair contact whose spot faces away: named past tan(tilt) = the limit (and the largest)
+    tilt = math.atan(HALF_SPACE_LIMIT)
+    pairs = NS(contacts=[NS(key=(k, k + 1, (0, 0)), contact=NS(half_space_ratio=0.01,
+                                                                spot_tilt=t))
+                         for k, t in enumerate((0.5 * tilt, 1.5 * tilt, 1.2 * tilt))])
+    text = cluster._beyond_half_space(problem, pairs)
+    assert "contact (1, 2, (0, 0)) has a spot facing 8.57° away" in text
+    assert "a/R" not in text and problem.beyond == text
+    pairs.contacts.pop(1)
+    pairs.contacts.pop(1)
+    assert cluster._beyond_half_space(problem, pairs) == "" and problem.beyond == text
 
 
 # --- the secant predictor: a guess of the step's motion ----------------------------------------

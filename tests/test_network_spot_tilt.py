@@ -16,6 +16,7 @@ from scipy.optimize import brentq, minimize_scalar
 
 import thirdbody as tb
 from thirdbody.network import Body
+from thirdbody.network.cluster import ClusterConvergenceError, ClusterNumerics, solve_cluster
 from thirdbody.network.contact import HALF_SPACE_LIMIT, HalfSpaceWarning, solve_contact
 from thirdbody.shapes import Sphere
 from thirdbody.shapes.potato import Potato, Wave
@@ -119,3 +120,46 @@ def test_a_spot_deeper_along_the_frame_than_along_its_own_normal_is_named():
     assert math.degrees(angle(bumps[0][1], bumps[1][1])) > 25
     with pytest.raises(RuntimeError, match="spots facing different ways are not modelled"):
         solve_contact(a, b, mu=0.3, spacing=a.size / 60)
+
+
+def on_the_lower_plate(radius: float) -> list[Body]:
+    """The potato on the lower plate and a sphere of ``radius`` resting on both bumps (the
+    touching height from :func:`placed`'s root finding, then raised by DEPTH)."""
+    a, b, _ = placed(radius, 0.0)
+    # the potato is symmetric about z = 0: its lowest points are its bumps' tops, mirrored
+    top = minimize_scalar(lambda x: -upper_surface(x), bounds=(0.05e-3, 0.6e-3),
+                          method="bounded", options={"xatol": 1e-12})
+    lift = np.array([0.0, 0.0, -float(top.fun)])
+    return [Body(a.shape, MAT, centre=a.centre + lift),
+            Body(b.shape, MAT, centre=b.centre + lift + [0.0, 0.0, DEPTH])]
+
+
+@pytest.mark.slow
+def test_a_cluster_step_with_a_tilted_spot_warns_and_reports_it():
+    """Solved by the cluster (0.02 N, 60 cells per size, 89 passes): the sphere of 3 mm rests
+    on both bumps; the step converges with the warning, and the contact's report carries the
+    tilt between the bumps' normals at the final poses (computed here in the potato's frame)."""
+    bodies = on_the_lower_plate(3e-3)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = solve_cluster(bodies, mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=0.02,
+                               numerics=ClusterNumerics(resolution=60, tol=1e-5))
+    pair = next(c for c in result.contacts if c.j == 1)
+    assert pair.spots == 2
+    potato, sphere = result.bodies
+    centre = potato.rotation.inv().apply(sphere.centre - potato.centre)
+    normals = [n for _, n in bump_contacts(centre, 3e-3)]
+    assert pair.spot_tilt == pytest.approx(angle(*normals), rel=1e-4)
+    assert any("(0, 1, (0, 0)): a spot faces 11.2°" in str(w.message) for w in caught)
+
+
+@pytest.mark.slow
+def test_a_cluster_step_that_fails_on_a_tilted_spot_says_so():
+    """The sphere of 1 mm (bumps' normals 28.8° apart) finds no equilibrium (30 cells per
+    size); the error names the contact and the cause."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ClusterConvergenceError,
+                           match=r"contact \(0, 1, \(0, 0\)\) has a spot facing 28\.8° away"):
+            solve_cluster(on_the_lower_plate(1e-3), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
+                          force=0.02, numerics=ClusterNumerics(resolution=30, tol=1e-5))

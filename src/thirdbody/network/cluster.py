@@ -473,6 +473,7 @@ class _Problem:
         self.phase_one_used = False
         self.correction: dict = {}     # (row, column) -> (6, 6): the models' learnt error
         self.failed = (0, 0)           # passes and contact solves of an attempt that failed
+        self.beyond = ""               # the last failed attempt's note beyond the contact model
         self.guessed = (0, 0)          # the same of a guess the first pass did not keep
         self.timings = {"narrow": 0.0, "contacts": 0.0, "newton": 0.0}
 
@@ -1696,6 +1697,11 @@ def solve_cluster(bodies: Sequence[Body], histories: Mapping | None = None, *, m
             return _iterate(problem, h, phase_one=True, learn=True)
         except ClusterConvergenceError:
             problem.failed = tuple(a + b for a, b in zip(failed, problem.failed, strict=True))
+            # what the later attempts found beyond the contact model (a/R, spots facing
+            # different ways) goes with the first attempt's residual
+            if problem.beyond and problem.beyond not in str(first):
+                raise ClusterConvergenceError(
+                    f"{first} (later attempts{problem.beyond})") from None
             raise first from None
 
 
@@ -1829,7 +1835,8 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
             problem.failed = (len(log), solves)
             raise ClusterConvergenceError(
                 f"cluster equilibrium stalled after the rotation-free phase: largest scaled "
-                f"residual {worst:.3e} > tol {numerics.tol:.1e} after {len(log)} passes")
+                f"residual {worst:.3e} > tol {numerics.tol:.1e} after {len(log)} passes"
+                f"{_beyond_half_space(problem, ev)}")
         if translate and (phase_passes >= _PHASE_ONE_PASSES or _force_residual(
                 problem, ev, ev.scale or merit_scale) <= _PHASE_ONE_TOL):
             translate = False
@@ -1868,7 +1875,8 @@ def _iterate(problem: _Problem, h: float, phase_one: bool = True,
                 problem.failed = (len(log), solves)
                 raise ClusterConvergenceError(
                     f"cluster equilibrium: a contact could not be solved at the trial poses "
-                    f"({exc}); residual {worst:.3e} > tol {numerics.tol:.1e}") from exc
+                    f"({exc}); residual {worst:.3e} > tol {numerics.tol:.1e}"
+                    f"{_beyond_half_space(problem, ev)}") from exc
             continue
         solves += trial.solves
         phase_passes += translate
@@ -1998,6 +2006,7 @@ def _beyond_half_space(problem: _Problem, ev: _Evaluation) -> str:
     if math.tan(tilt) > limit:
         out += (f"; contact {tilted} has a spot facing {math.degrees(tilt):.3g}° away from its "
                 f"normal: spots facing different ways (non-convex particles) are not modelled")
+    problem.beyond = out or problem.beyond
     return out
 
 
