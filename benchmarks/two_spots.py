@@ -108,14 +108,17 @@ def main(argv: list[str] | None = None) -> None:
                 print(f"R = {radius * 1e3:g} mm, {cells:g} cells: FAILED ({out}), {cpu:.1f} s",
                       flush=True)
                 continue
-            pair = next(c for c in out.contacts if c.j == 1)
-            lean = math.degrees(math.atan2(math.hypot(*pair.normal[:2]), pair.normal[2]))
-            share = float(np.linalg.norm(pair.tangential_force)) / pair.normal_force
-            print(f"R = {radius * 1e3:g} mm, {cells:g} cells: {out.iterations} passes, pair "
-                  f"{pair.spots} spots, normal leaning {lean:.2f}°, second spot facing "
-                  f"{math.degrees(pair.spot_tilt):.2f}° away, |T|/N {share:.4f}, sphere "
-                  f"moved {out.translation[1][0] * 1e9:+.2f} nm along x, {cpu:.1f} s",
-                  flush=True)
+            pairs = [c for c in out.contacts if c.j == 1]
+            total = sum(c.force for c in pairs)          # on the potato, from the sphere
+            parts = "; ".join(
+                f"N {c.normal_force:.5g} N, normal leaning "
+                f"{math.degrees(math.atan2(c.normal[0], c.normal[2])):+.2f}° in x, |T|/N "
+                f"{float(np.linalg.norm(c.tangential_force)) / c.normal_force:.4f}, spots "
+                f"{c.spots}, spot tilt {math.degrees(c.spot_tilt):.2f}°" for c in pairs)
+            print(f"R = {radius * 1e3:g} mm, {cells:g} cells: {out.iterations} passes, "
+                  f"{len(pairs)} pair contacts ({parts}); their sum on the potato "
+                  f"({total[0]:+.2e}, {total[1]:+.2e}, {total[2]:+.6f}) N; sphere moved "
+                  f"{out.translation[1][0] * 1e9:+.2f} nm along x, {cpu:.1f} s", flush=True)
 
 
 if __name__ == "__main__":

@@ -231,11 +231,14 @@ VARIABLES: dict[str, Variable] = {v.name: v for v in (
     _v("fraction_slide", "step", "1", "network runs: fraction of the loaded particles that "
                                       "slid without turning (slide, slide_upper, "
                                       "slide_lower)", summary=True),
-    _v("particle_contacts", "step", "1", "network runs: number of particle-particle contacts "
-                                         "carrying load", dtype="int64", fill=0, summary=True),
+    _v("particle_contacts", "step", "1", "network runs: number of touching particle pairs "
+                                         "carrying load (a pair touching on contacts facing "
+                                         "different ways counts once)", dtype="int64", fill=0,
+       summary=True),
     _v("coordination", "step", "1",
        "network runs: mean number of contacts of a loaded particle (a particle-particle "
-       "contact counts for both particles, a plate contact once)", summary=True),
+       "contact counts for both particles, a plate contact once, a neighbour touched on "
+       "contacts facing different ways once)", summary=True),
     _v("both_plates_force", "step", "N",
        "network runs: the part of F_N carried by particles touching both plates (the upper "
        "plate's normal force on them)"),

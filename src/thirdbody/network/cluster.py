@@ -15,7 +15,14 @@ model of each contact as the tangent.** One iteration:
    quarter of the size, periodic in x and y if a box is given), the narrow phase
    (:func:`~thirdbody.network.closest_approach`); pairs that overlap are solved in approach
    control (:func:`~thirdbody.network.solve_contact`), the others are open contacts with their
-   separation (that of the bounding spheres when these are apart). The tangential problem
+   separation (that of the bounding spheres when these are apart). A pair that touches on
+   spots facing different ways (a non-convex particle: a sphere on two bumps) is split into
+   one contact per spot, each with its own closest points, frame, history and model, when a
+   spot faces away from the contact's normal by more than tan⁻¹ of the half-space limit
+   (:attr:`~thirdbody.network.PairContact.facing`): keys ``(k, m, image)`` and
+   ``(k, m, image, s)``, s = 1, 2, ...; each is found again by a local search from its last
+   solve, and the surfaces are shared out by the bisecting planes of their closest points
+   (``others`` of :func:`~thirdbody.network.solve_contact`). The tangential problem
    of each contact is one increment from its history at the start of the step (or from zero
    for a new contact) under the shift increment of the bodies' rigid motion since then
    (midpoint rule, :mod:`~thirdbody.network.plate`); a contact that closed during the step sees
@@ -189,7 +196,8 @@ class ContactHistory:
     ----------
     key : tuple
         ``(i, j, (m_x, m_y))`` for particles i < j (j's centre plus (m_x L_x, m_y L_y, 0) is the
-        image that meets i), or ``(i, "lower" | "upper")``.
+        image that meets i), ``(i, j, (m_x, m_y), s)`` for the s-th further contact of a pair
+        split into contacts facing different ways (s >= 1), or ``(i, "lower" | "upper")``.
     roles : tuple
         (index of body a, index of body b) for a pair (the solve's roles, kept while the
         contact lives); (i, side) for a plate.
@@ -485,7 +493,7 @@ class _Problem:
             if key[0] not in u2k or key[1] not in PLATES:
                 raise ValueError(f"history key {key!r} names no particle of this cluster")
             return (u2k[key[0]], key[1]), (u2k[key[0]], key[1])
-        i, j, image = key
+        i, j, image, *part = key
         if i not in u2k or j not in u2k:
             raise ValueError(f"history key {key!r} names no particle of this cluster")
         ki, kj = u2k[i], u2k[j]
@@ -493,16 +501,16 @@ class _Problem:
         if ki > kj:
             ki, kj, image = kj, ki, (-image[0], -image[1])
         roles = (u2k[hist.roles[0]], u2k[hist.roles[1]])
-        return (ki, kj, image), roles
+        return (ki, kj, image, *part), roles
 
     def user_key(self, key: tuple) -> tuple:
         if len(key) == 2:
             return (self.order[key[0]], key[1])
-        k, m, image = key
+        k, m, image, *part = key
         i, j = self.order[k], self.order[m]
         if i > j:
-            return (j, i, (-image[0], -image[1]))
-        return (i, j, image)
+            return (j, i, (-image[0], -image[1]), *part)
+        return (i, j, image, *part)
 
     def body(self, k: int, centres, rotations) -> Body:
         b = self.start[k]
@@ -510,7 +518,7 @@ class _Problem:
 
     def pair_bodies(self, key, roles, centres, rotations):
         """Bodies a and b of a pair (b at the image that meets a)."""
-        _, second, image = key
+        second, image = key[1], key[2]
         shift = _shift(image, self.box)          # added to the second's centre
         a, b = roles
         A = self.body(a, centres, rotations)
@@ -521,9 +529,11 @@ class _Problem:
             B = B.moved(centre=B.centre - shift)
         return A, B
 
-    def start_contact(self, key, roles) -> tuple[float, np.ndarray | None]:
+    def start_contact(self, key, roles, near=None) -> tuple[float, np.ndarray | None]:
         """A contact's signed separation at the start of the step (m) and where it would touch
-        then (world, m; None if unknown), for a contact without history."""
+        then (world, m; None if unknown), for a contact without history. A split pair's
+        contact (key (k, m, image, s)) is found by the local search from ``near`` (its
+        approach at the current poses)."""
         hit = self._start.get(key)
         if hit is None:
             centres = np.array([b.centre for b in self.start])
@@ -542,17 +552,21 @@ class _Problem:
                 hit = (separation, point)
             else:
                 A, B = self.pair_bodies(key, roles, centres, rotations)
-                closest = closest_approach(A, B)
+                if len(key) == 4 and near is not None:
+                    closest = closest_approach(A, B, normal=near.normal, near=near.midpoint,
+                                               local=True)
+                else:
+                    closest = closest_approach(A, B)
                 hit = ((float(np.linalg.norm(B.centre - A.centre)) - A.size - B.size, None)
                        if closest is None else (closest.separation, closest.midpoint))
             self._start[key] = hit
         return hit
 
-    def fraction(self, key, roles, depth: float) -> float:
+    def fraction(self, key, roles, depth: float, near=None) -> float:
         """Share of the step's motion a contact without history saw (module docstring)."""
         if depth <= 0:
             return 0.0
-        before = self.start_contact(key, roles)[0]
+        before = self.start_contact(key, roles, near)[0]
         if not before > 0:
             return 1.0
         return depth / (depth + before)
@@ -615,24 +629,34 @@ class _Problem:
             self.timings["contacts"] += t1 - t0
             # pairs
             pairs = candidate_pairs(centres, self.radii, self.box) if self.n > 1 else []
+            split = self._parts(last)
             todo = []
             for k, m, shift in pairs:
                 key = (k, m, _image(shift, self.box))
+                parts = split.get(key, ())
                 hist = self.histories.get(key)
                 roles = (k, m) if hist is None else hist[0]
+                if hist is None and parts:
+                    roles = self._part_roles(parts[0], last)
                 A, B = self.pair_bodies(key, roles, centres, rotations)
                 guess = near = None
                 warm = last.get(key)
                 if warm is not None:
                     # the last pass's closest points, moved with the bodies, start the search
-                    solved = warm.contact
-                    guess = solved.normal
-                    near = solved.origin + 0.5 * ((A.centre - solved.a.centre)
-                                                  + (B.centre - solved.b.centre))
+                    guess, near = _moved_point(warm.contact, A, B)
                 elif hist is not None:
                     old = hist[1]
                     guess = sum((new.rotation * prev.rotation.inv()).apply(old.normal)
                                 for new, prev in ((A, old.a), (B, old.b)))
+                if parts:
+                    # a pair split into contacts facing different ways: each keeps its own
+                    # minimum of the gap (a scan would find the deepest for every one)
+                    if near is None and hist is not None:
+                        near = _moved_point(hist[1], A, B)[1]
+                    closest = None if near is None else \
+                        closest_approach(A, B, normal=guess, near=near, local=True)
+                    todo.append((key, roles, hist, A, B, closest, warm, parts))
+                    continue
                 closest = closest_approach(A, B, normal=guess, near=near)
                 if closest is None:
                     d = B.centre - A.centre
@@ -660,29 +684,42 @@ class _Problem:
                         0.5 * min(A.shape.feature_length, B.shape.feature_length),
                         (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles)))
                     continue
-                todo.append((key, roles, hist, A, B, closest, warm))
+                todo.append((key, roles, hist, A, B, closest, warm, ()))
             t2 = time.perf_counter()
             self.timings["narrow"] += t2 - t1
-            for key, roles, hist, A, B, closest, warm in todo:
-                a, b = roles
-                mu = self.pair_mu(a, b)
-                fraction = 1.0 if hist is not None else \
-                    self.fraction(key, roles, -closest.separation)
-                kinematics = self._pair_kinematics(key, roles, A, B, closest,
-                                                   None if hist is None else hist[1])
-                shift = fraction * kinematics[0] if mu > 0 else None
-                solved = solve_contact(
-                    A, B, mu=mu, previous=None if hist is None else hist[1],
-                    spacing=min(self.cells[a], self.cells[b]), tol=numerics.solver_tol,
-                    closest=closest, warm=None if warm is None else warm.contact,
-                    shift_increment=shift, half_space_limit=numerics.half_space_limit)
-                solves += 1
-                if solved is None:
-                    continue
-                _, mid_a, mid_b, turn_a, turn_b = kinematics
-                model = _pair_model(solved, A, B, mu).stepping(
-                    mid_a=mid_a, mid_b=mid_b, turn_a=turn_a, turn_b=turn_b, fraction=fraction)
-                contacts.append(_Solved(key, roles, solved, _secant(model, solved, warm)))
+            for key, roles, hist, A, B, closest, warm, parts in todo:
+                members = []            # (key, closest approach, history or None, warm or None)
+                if closest is not None and closest.separation < 0:
+                    members.append((key, closest, None if hist is None else hist[1], warm))
+                for part in parts:
+                    found = self._part_approach(part, A, B, last)
+                    if found is not None and found.separation < 0:
+                        old = self.histories.get(part)
+                        members.append((part, found, None if old is None else old[1],
+                                        last.get(part)))
+                members = _distinct(members, min(A.size, B.size))
+                count = 1 + max((p[3] for p in parts), default=0)
+                for _ in range(_SPLIT_ROUNDS):
+                    points = [c.midpoint for _, c, _, _ in members]
+                    done = []
+                    for i, (mkey, mclosest, mhist, mwarm) in enumerate(members):
+                        out = self._solve_pair(mkey, roles, A, B, mclosest, mhist, mwarm,
+                                               points[:i] + points[i + 1:])
+                        solves += 1
+                        if out is not None:
+                            done.append(out)
+                    # spots of a contact that face away from it by more than the half-space
+                    # limit become contacts of their own (keys (k, m, image, s)), and the pair
+                    # is solved again on its parts
+                    new = [f for d in done for f in d.contact.facing]
+                    new = _distinct([(None, f, None, None) for f in new], min(A.size, B.size),
+                                    [c for _, c, _, _ in members])
+                    if not new:
+                        break
+                    for _, f, _, _ in new:
+                        members.append(((*key, count), f, None, None))
+                        count += 1
+                contacts.extend(done)
             self.timings["contacts"] += time.perf_counter() - t2
         forces, moments = self._sums(contacts)
         upper = [c.contact.normal_force for c in contacts if c.key[-1] == "upper"]
@@ -690,6 +727,49 @@ class _Problem:
         scale = math.fsum(normals) / len(normals) if normals else 0.0
         return _Evaluation(np.array(centres, dtype=float), list(rotations), h, contacts,
                            potential, forces, moments, math.fsum(upper), scale, solves)
+
+    def _solve_pair(self, key, roles, A, B, closest, previous, warm, others):
+        """One pair contact solved at these poses (its share of the step, kinematics, the BEM
+        and its model), or None when it does not touch."""
+        a, b = roles
+        mu = self.pair_mu(a, b)
+        numerics = self.numerics
+        fraction = 1.0 if previous is not None else \
+            self.fraction(key, roles, -closest.separation, closest)
+        kinematics = self._pair_kinematics(key, roles, A, B, closest, previous)
+        shift = fraction * kinematics[0] if mu > 0 else None
+        solved = solve_contact(
+            A, B, mu=mu, previous=previous, spacing=min(self.cells[a], self.cells[b]),
+            tol=numerics.solver_tol, closest=closest,
+            warm=None if warm is None else warm.contact, shift_increment=shift,
+            half_space_limit=numerics.half_space_limit, others=others)
+        if solved is None:
+            return None
+        _, mid_a, mid_b, turn_a, turn_b = kinematics
+        model = _pair_model(solved, A, B, mu).stepping(
+            mid_a=mid_a, mid_b=mid_b, turn_a=turn_a, turn_b=turn_b, fraction=fraction)
+        return _Solved(key, roles, solved, _secant(model, solved, warm))
+
+    def _parts(self, last: dict) -> dict:
+        """The contacts a pair was split into (keys (k, m, image, s), s >= 1) that the histories
+        or the last pass hold, by the pair's key (k, m, image)."""
+        out: dict = {}
+        for key in {*self.histories, *last}:
+            if len(key) == 4:
+                out.setdefault(key[:3], []).append(key)
+        return {k: tuple(sorted(v, key=lambda key: key[3])) for k, v in out.items()}
+
+    def _part_roles(self, part: tuple, last: dict) -> tuple:
+        hist = self.histories.get(part)
+        return hist[0] if hist is not None else last[part].roles
+
+    def _part_approach(self, part: tuple, A: Body, B: Body, last: dict):
+        """A split pair's contact: the local closest approach from its last solve (the last
+        pass's, or its history's), moved with the bodies; None if the search fails."""
+        warm = last.get(part)
+        old = warm.contact if warm is not None else self.histories[part][1]
+        guess, near = _moved_point(old, A, B)
+        return closest_approach(A, B, normal=guess, near=near, local=True)
 
     def _pair_kinematics(self, key, roles, A, B, closest, old):
         """The step's rigid motion at a pair contact: (the shift increment of b relative to a,
@@ -702,7 +782,7 @@ class _Problem:
         if old is not None:
             o0 = old.origin
         else:
-            o0 = self.start_contact(key, roles)[1]
+            o0 = self.start_contact(key, roles, closest)[1]
             o0 = o1 if o0 is None else o0
         motion, mids, turns = [], [], []
         for new, then in ((A, A0), (B, B0)):
@@ -739,6 +819,31 @@ class _Problem:
                 forces[k] = [math.fsum(F[:, d]) for d in range(3)]
                 moments[k] = [math.fsum(M[:, d]) for d in range(3)]
         return forces, moments
+
+
+#: rounds of splitting a pair into contacts facing different ways in one evaluation
+_SPLIT_ROUNDS = 3
+
+
+def _moved_point(solved: PairContact, A: Body, B: Body) -> tuple[np.ndarray, np.ndarray]:
+    """A pair contact's last normal and its closest points' midpoint moved with the bodies'
+    mean translation since: where a local search for it starts."""
+    return solved.normal, solved.origin + 0.5 * ((A.centre - solved.a.centre)
+                                                 + (B.centre - solved.b.centre))
+
+
+def _distinct(members: list, size: float, existing=()) -> list:
+    """``members`` (key, approach, ...) less those whose closest points lie within 1e-3 of the
+    smaller body's ``size`` of an earlier one's or of an ``existing`` approach's (two local
+    searches that found the same minimum of the gap)."""
+    kept: list = []
+    seen = [c.midpoint for c in existing]
+    for member in members:
+        point = member[1].midpoint
+        if all(np.linalg.norm(point - q) > 1e-3 * size for q in seen):
+            kept.append(member)
+            seen.append(point)
+    return kept
 
 
 def _tangential_state(c) -> tuple[np.ndarray, np.ndarray]:
@@ -1406,7 +1511,7 @@ def _contact_keys(contacts, n: int) -> list[set]:
     keys: list[set] = [set() for _ in range(n)]
     for c in contacts:
         keys[c.key[0]].add(c.key)
-        if len(c.key) == 3:
+        if len(c.key) >= 3:
             keys[c.key[1]].add(c.key)
     return keys
 
@@ -2120,8 +2225,8 @@ def _result(problem: _Problem, ev: _Evaluation, worst: float, passes: int, solve
 
 def _sort_key(key: tuple):
     if len(key) == 2:
-        return (key[0], 1, PLATES.index(key[1]), 0, 0)
-    return (key[0], 0, key[1], key[2][0], key[2][1])
+        return (key[0], 1, PLATES.index(key[1]), 0, 0, 0)
+    return (key[0], 0, key[1], key[2][0], key[2][1], *key[3:])
 
 
 def wrap(result_bodies: Sequence[Body], histories: Mapping, box) -> tuple[list[Body], dict]:
@@ -2141,11 +2246,11 @@ def wrap(result_bodies: Sequence[Body], histories: Mapping, box) -> tuple[list[B
         jumps.append(tuple(m))
     out = {}
     for key, hist in histories.items():
-        if len(key) == 3:
-            i, j, image = key
+        if len(key) >= 3:
+            i, j, image, *part = key
             # c_j + image L meets c_i; after the moves c_j' = c_j − m_j L, c_i' = c_i − m_i L
             new = (image[0] + jumps[j][0] - jumps[i][0], image[1] + jumps[j][1] - jumps[i][1])
-            key = (i, j, new)
+            key = (i, j, new, *part)
             solved = hist.solved
             # the stored bodies move with their particles (same image relation)
             shift_a = np.array([-jumps[hist.roles[0]][0] * box[0],

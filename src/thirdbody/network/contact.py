@@ -7,7 +7,10 @@ points, tangent axes tied to the bodies: :func:`~thirdbody.network.frame.pair_fr
 below and b above. The gap is b's lower surface minus a's upper surface along the frame's
 vertical rays, measured from first touch, over every cell that can touch
 (:mod:`~thirdbody.network.window`); several spots share the frame of the deepest one and one
-rigid approach along its normal, as the spots of a plate do. Both bodies are elastic
+rigid approach along its normal, as the spots of a plate do. A spot that faces elsewhere (a
+non-convex body touching on two bumps) is measured (``spot_tilt``) and, past tan⁻¹ of the
+half-space limit, handed on with its own closest approach (``facing``): a cluster then solves
+one contact per spot, each on its share of the surfaces (``others``). Both bodies are elastic
 half-spaces with the pair's compliance (:meth:`ElasticPair.of`: 1/E* = Σ (1 − ν_i²)/E_i,
 1/G = Σ 1/G_i; Johnson 1985, §4.2 and §7.2): the frame's problem is the plate solvers' problem
 with b in the role of the plate. Normal and tangential problems are uncoupled (Goodman's
@@ -72,7 +75,7 @@ from ..orientation import Rotation
 from ..particle.interface import Window, remap
 from .body import Body
 from .frame import pair_frame, smallest_rotation
-from .narrow import Approach, _local, _smoothing, _stencil, closest_approach
+from .narrow import Approach, _smoothing, _stencil, closest_approach
 from .window import Lattice, carry_field, ring, union, window_around, window_gap
 
 __all__ = ["HALF_SPACE_LIMIT", "HalfSpaceWarning", "PairContact", "solve_contact"]
@@ -175,6 +178,10 @@ class PairContact:
     tangential_solution : TangentialContact or None
     closest : Approach
         The narrow phase's result.
+    facing : tuple of Approach
+        The local closest approaches of the spots that face away from :attr:`normal` by more
+        than tan⁻¹ of the half-space limit: where a cluster splits the pair into one contact
+        per spot (``others`` of :func:`solve_contact`).
     methods : tuple of str
         Published methods behind the result (:func:`thirdbody.citations`).
     """
@@ -218,6 +225,7 @@ class PairContact:
     tangential_solution: TangentialContact | None = field(repr=False)
     closest: Approach = field(repr=False)
     methods: tuple[str, ...] = ()
+    facing: tuple[Approach, ...] = field(default=(), repr=False)
 
     @property
     def tangent_axes(self) -> np.ndarray:
@@ -292,22 +300,24 @@ def _curvatures(a: Body, b: Body, frame, origin) -> tuple[np.ndarray, np.ndarray
     return st[0][2], st[1][2]
 
 
-def _spot_tilt(a: Body, b: Body, frame, origin, n, X, Y, p, labels, spots: int) -> float:
-    """The largest angle (rad) between a spot's own common normal and the frame's.
+def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
+                  spots: int) -> list[tuple[float, Approach | None]]:
+    """Each spot's angle (rad) between its own common normal and the frame's, with the local
+    closest approach that gave it (or None), the spot holding the frame origin left out.
 
     A spot's own normal is the common normal of the surfaces' local closest points there: the
-    narrow phase's local search (:func:`~thirdbody.network.narrow._local`) started at the
-    spot's pressure centroid with the frame normal tilted by the surfaces' mean slope there
+    narrow phase's local search (``closest_approach(local=True)``) started at the spot's
+    pressure centroid with the frame normal tilted by the surfaces' mean slope there
     (atan|½(g_a + g_b)|, which is the tilt itself up to the centroid's offset of a fraction of
-    a cell). Where that search fails or ends nearer the frame origin than the spot, the slope's
-    estimate stands. The spot holding the closest points (the frame origin) faces the frame
-    normal by construction (0). One spot: 0. A spot whose surfaces cannot be sampled counts as
-    facing the frame normal."""
+    a cell). Where that search fails (normal not within 1e-6 rad) or ends nearer the frame
+    origin than the spot, the slope's
+    estimate stands (and no approach). The spot holding the closest points faces the frame
+    normal by construction. A spot whose surfaces cannot be sampled is left out."""
     if spots < 2:
-        return 0.0
+        return []
     home = int(labels.ravel()[int(np.argmin((X * X + Y * Y).ravel()))])
     t1, t2 = frame.inv().apply(np.eye(3)[:2])
-    worst = 0.0
+    out = []
     for spot in range(1, spots + 1):
         if spot == home:
             continue
@@ -324,14 +334,17 @@ def _spot_tilt(a: Body, b: Body, frame, origin, n, X, Y, p, labels, spots: int) 
         slope = 0.5 * (st[0][1] + st[1][1])
         tilt = math.atan(float(np.hypot(*slope)))
         guess = frame.inv().apply(np.array([-slope[0], -slope[1], 1.0]))
-        h = max(1e-3 * min(a.size, b.size), _smoothing(a), _smoothing(b))
-        found = _local(a, b, guess / np.linalg.norm(guess), point, h, 1e-10, 60)
-        if found is not None and found[4] and \
-                np.linalg.norm(found[1] - point) < np.linalg.norm(found[1] - origin):
-            own = found[0]
+        found = closest_approach(a, b, normal=guess, near=point, local=True)
+        # its normal to 1e-6 rad (a shallow pair, two flat surfaces, may not meet the search's
+        # step tolerance in its iterations with the normal already found)
+        if found is not None and (found.converged or found.slope < 1e-6) and \
+                np.linalg.norm(found.midpoint - point) < np.linalg.norm(found.midpoint - origin):
+            own = found.normal
             tilt = math.atan2(float(np.linalg.norm(np.cross(own, n))), float(own @ n))
-        worst = max(worst, tilt)
-    return worst
+        else:
+            found = None
+        out.append((tilt, found))
+    return out
 
 
 def _radii(hessian: np.ndarray) -> np.ndarray:
@@ -365,7 +378,7 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
                   previous: PairContact | None = None, spacing: float | None = None,
                   cells_per_radius: float = 16.0, tol: float = 1e-8,
                   half_space_limit: float = HALF_SPACE_LIMIT, closest: Approach | None = None,
-                  warm: PairContact | None = None) -> PairContact | None:
+                  warm: PairContact | None = None, others=()) -> PairContact | None:
     """Solve the contact of bodies a and b (module docstring).
 
     Parameters
@@ -407,6 +420,11 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
     warm : PairContact, optional
         A recent solve of this contact (same roles) whose pressure starts the normal solve
         instead of ``previous``'s.
+    others : sequence of (3,) arrays
+        World points (the midpoints of the closest points) of the pair's other contacts, where
+        the bodies touch facing other ways: the surfaces are split between the contacts by the
+        bisecting planes of the points (:class:`~thirdbody.network.window.Lattice`), and this
+        contact is solved on its own part. Give ``closest`` with them (the local approach).
 
     Returns
     -------
@@ -482,7 +500,7 @@ def solve_contact(a: Body, b: Body, *, mu: float, normal_force: float | None = N
         spacing = previous.grid.dx if previous is not None else half_width / cells_per_radius
     bound = 1.05 * bound + 1e-12 * spacing
 
-    lattice = Lattice(a, b, frame, origin, closest.separation, spacing)
+    lattice = Lattice(a, b, frame, origin, closest.separation, spacing, others)
     carry = None if previous is None else _Carry.of(previous, a, b, frame, spacing)
     seed = None if carry is None else carry.pressure
     if warm is not None and warm.grid.dx == spacing:
@@ -741,7 +759,9 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
             f"contact radius / radius of curvature = {ratio:.3g} > {limit:.3g}: the half-space "
             f"model of the contact is out of its range (a = {radius:.3g} m, R = "
             f"{curvature:.3g} m)"), stacklevel=3)
-    tilt = _spot_tilt(a, b, frame, origin, n, X, Y, p, labels, spots)
+    normals = _spot_normals(a, b, frame, origin, n, X, Y, p, labels, spots)
+    tilt = max((t for t, _ in normals), default=0.0)
+    facing = tuple(found for t, found in normals if found is not None and math.tan(t) > limit)
     if math.tan(tilt) > limit:
         warnings.warn(HalfSpaceWarning(
             f"a spot of the contact faces {math.degrees(tilt):.3g}° away from its normal "
@@ -765,7 +785,7 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
         spots=int(spots),
         pressure_centroid=origin + xc * t1 + yc * t2, contact_radius=radius,
         radii_a=radii_a, radii_b=radii_b, curvature_radius=curvature,
-        half_space_ratio=ratio, spot_tilt=tilt,
+        half_space_ratio=ratio, spot_tilt=tilt, facing=facing,
         shift=np.zeros(2) if tangential is None else np.asarray(tangential.shift, dtype=float),
         shift_increment=increment[0] * t1 + increment[1] * t2, slip=slip,
         twist_moment=twist_moment, curvature_a=-Ha, curvature_b=Hb, twist=twist, mu=mu,

@@ -332,7 +332,7 @@ def _local_gap_minimum(a: Body, b: Body, F: _Frame, origin, x0: float, y0: float
 
 
 def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60,
-                     normal=None, near=None) -> Approach | None:
+                     normal=None, near=None, local: bool = False) -> Approach | None:
     """The common normal and closest points of bodies a and b (module docstring).
 
     Parameters
@@ -352,6 +352,10 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
         the footprint. Convex bodies (ellipsoids) have one minimum of the gap, so that is all;
         other shapes are still scanned for a deeper one (step 3). If the search from there
         fails, the scan is done as without ``near``.
+    local : bool
+        With ``normal`` and ``near``: the local search from there only, no scan for a deeper
+        minimum and no other start (one contact of a pair that touches in several places facing
+        different ways: :mod:`thirdbody.network.contact`). None if it fails.
 
     Returns
     -------
@@ -367,6 +371,12 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
     if distance > (a.size + b.size) * (1.0 + 1e-12):
         return None
     towards = d / distance if distance > 0 else np.array([0.0, 0.0, 1.0])
+    if local:
+        if normal is None or near is None:
+            raise ValueError("a local search needs a normal and a point near the contact")
+        guess = np.asarray(normal, dtype=float).reshape(3)
+        return _search(a, b, guess / np.linalg.norm(guess), tol, max_iter,
+                       np.asarray(near, dtype=float).reshape(3), local=True)
     starts = [(towards, None)]
     if normal is not None:
         guess = np.asarray(normal, dtype=float).reshape(-1)
@@ -389,7 +399,7 @@ def closest_approach(a: Body, b: Body, *, tol: float = 1e-10, max_iter: int = 60
 
 
 def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int,
-            near: np.ndarray | None = None) -> Approach | None:
+            near: np.ndarray | None = None, local: bool = False) -> Approach | None:
     """closest_approach from one first normal estimate ``n`` (and a world point ``near`` the
     contact to start the local search at, instead of a scan's lowest sample)."""
     spacing = _scan_spacing(a, b)
@@ -431,7 +441,7 @@ def _search(a: Body, b: Body, n: np.ndarray, tol: float, max_iter: int,
         if best is None or (candidate.converged, -candidate.separation) > \
                 (best.converged, -best.separation):
             best = candidate
-        if convex and converged:
+        if (convex and converged) or local:
             break
         # a deeper minimum elsewhere in this frame? (non-convex bodies)
         F, origin, n = F_k, candidate.midpoint, n_k

@@ -499,7 +499,9 @@ class NetworkEngine:
                 plate[c.i][c.j] = c
             else:
                 touching[c.j].append(c)
-        degree = [len(t) for t in touching]
+        # a neighbour touched on contacts facing different ways (keys (i, j, image, s)) counts
+        # once, as a plate touched on several spots does
+        degree = [len({c.key[:3] for c in t}) for t in touching]
         records = []
         for i, body in enumerate(result.bodies):
             records.append(self._particle(k, step, i, body, result, starts[i], plate[i],
@@ -520,7 +522,7 @@ class NetworkEngine:
             fraction_roll=sum(s in ("roll_upper", "roll_lower", "roll") for s in states) / m,
             fraction_rotate=states.count("rotate") / m,
             fraction_slide=sum(s in schema.SLIDING for s in states) / m,
-            particle_contacts=len(pairs),
+            particle_contacts=len({c.key[:3] for c in pairs}),
             coordination=(math.fsum(degree[i] for i in loaded) / len(loaded)
                           if loaded else math.nan),
             both_plates_force=math.fsum(plate[i]["upper"].normal_force for i in both),

@@ -58,12 +58,18 @@ class Lattice:
         The gap's zero level: the closest approach's separation σ, m.
     spacing : float
         Cell size Δ, m.
+    others : sequence of (3,) arrays
+        World points of the pair's other contacts (where the bodies also touch, facing other
+        ways): a cell nearer to one of them than to ``origin`` belongs to that contact, and its
+        gap is +inf here (the bisecting plane of the two points splits the surfaces).
     """
 
-    def __init__(self, a, b, frame, origin, zero: float, spacing: float) -> None:
+    def __init__(self, a, b, frame, origin, zero: float, spacing: float, others=()) -> None:
         self.a, self.b, self.frame = a, b, frame
         self.origin = np.asarray(origin, dtype=float)
         F = frame.as_matrix()
+        # each other point q (frame coordinates): cells with x q_x + y q_y > |q|²/2 are its
+        self._others = [F @ (np.asarray(q, dtype=float) - self.origin) for q in others]
         self._seen = (Seen(a, frame, self.origin, F), Seen(b, frame, self.origin, F))
         box = footprint_box(a, b, frame, self.origin)
         if box is None:
@@ -90,7 +96,10 @@ class Lattice:
     def _rays(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The raw gap (m, before the zero level is taken off) at lattice coordinates x, y (m);
         +inf where a ray misses."""
-        return seen_gap(*self._seen, x, y)
+        gap = seen_gap(*self._seen, x, y)
+        for q in self._others:
+            gap = np.where(x * q[0] + y * q[1] > 0.5 * float(q @ q), np.inf, gap)
+        return gap
 
     def gap(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
         """g₀ (m) at cells (i, j) (integer arrays of one shape); +inf where a ray misses."""
