@@ -20,6 +20,7 @@ import thirdbody as tb
 from thirdbody.network import Body
 from thirdbody.network.cluster import ClusterNumerics, solve_cluster
 from thirdbody.network.contact import HALF_SPACE_LIMIT, HalfSpaceWarning, solve_contact
+from thirdbody.network.narrow import closest_approach
 from thirdbody.shapes import Sphere
 from thirdbody.shapes.potato import Potato, Wave
 
@@ -219,3 +220,63 @@ def test_split_contacts_keep_their_keys_and_histories_over_load_steps():
     normals = [n for _, n in bump_contacts(P.rotation.inv().apply(S.centre - P.centre), 3e-3)]
     mindlin = 2 * 0.7 / 1.7 * math.tan(0.5 * angle(*normals))
     assert mindlin < min(ratio) and max(ratio) < 0.9 * min(one_go)
+
+
+def test_each_split_contact_that_closed_in_the_step_sees_its_own_share_of_the_motion():
+    """Both bumps apart at the start of the step (the deeper by 0.49 µm, the other by 1.08 µm:
+    the sphere is 3 µm off centre), the sphere then lowered by 2 µm: each contact, new in the step,
+    is loaded by the share of the sphere's motion after it closed, δ/(δ + σ₀) with σ₀ its own
+    separation at the start (from the radial function) and δ its overlap now, the motion's
+    component in its tangent plane (the split contact's start found by its own local search,
+    not the pair's deepest)."""
+    from thirdbody.network import cluster
+
+    a, b, _ = placed(3e-3, 3e-6)
+    lift = np.array([0.0, 0.0, DEPTH + 0.5e-6])
+    start = [a, b.moved(centre=b.centre + lift)]
+    sigma0 = sorted(-o for o, _ in bump_contacts(start[1].centre, 3e-3))
+    assert 0.4e-6 < sigma0[0] < 0.5e-6 and sigma0[1] > 1e-6
+    problem = cluster._Problem(start, {}, 0.3, 0.3, cluster._mu_function(0.3), None, 0.02,
+                               None, (0.0, 0.0), None, ClusterNumerics(resolution=60))
+    assert problem.order == [0, 1]
+    move = np.array([0.0, 0.0, -2e-6])
+    B = start[1].moved(centre=start[1].centre + move)
+    bumps = sorted(bump_contacts(B.centre, 3e-3), key=lambda t: -t[0])     # deeper first
+    first = closest_approach(a, B)
+    second = closest_approach(a, B, normal=bumps[1][1], near=B.centre - 3e-3 * bumps[1][1],
+                              local=True)
+    solved = [problem._solve_pair((0, 1, (0, 0)), (0, 1), a, B, first, None, None,
+                                  [second.midpoint]),
+              problem._solve_pair((0, 1, (0, 0), 1), (0, 1), a, B, second, None, None,
+                                  [first.midpoint])]
+    for s, (overlap, normal), before in zip(solved, bumps, sigma0, strict=True):
+        c = s.contact
+        assert angle(c.normal, normal) < 1e-6
+        share = overlap / (overlap + before)
+        tangential = move - (move @ c.normal) * c.normal
+        assert c.shift_increment == pytest.approx(share * tangential, rel=1e-6, abs=1e-18)
+        assert np.linalg.norm(tangential) > 0.09 * 2e-6          # tilted by 5.6° each way
+
+
+@pytest.mark.slow
+def test_a_split_pair_whose_first_contact_opened_is_found_again():
+    """The converged sphere of 3 mm, its pair's first contact dropped from the histories (as if
+    it had opened): the next step finds the bump again, by the global search, beside the split
+    contact, which keeps its key and history."""
+    numerics = ClusterNumerics(resolution=60, tol=1e-5)
+    first = solve_cluster(on_the_lower_plate(3e-3), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
+                          force=0.02, numerics=numerics)
+    histories = {k: h for k, h in first.histories.items() if k != (0, 1, (0, 0))}
+    assert (0, 1, (0, 0), 1) in histories
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", HalfSpaceWarning)
+        result = solve_cluster(list(first.bodies), histories, mu_up=0.3, mu_low=0.3,
+                               mu_pp=0.3, force=0.02, gap_start=first.gap, numerics=numerics)
+    pairs = [c for c in result.contacts if c.j == 1]
+    assert len(pairs) == 2 and (0, 1, (0, 0), 1) in [c.key for c in pairs]
+    P, S = result.bodies
+    normals = [P.rotation.apply(n) for _, n in
+               bump_contacts(P.rotation.inv().apply(S.centre - P.centre), 3e-3)]
+    assert sorted(min(range(2), key=lambda k: angle(c.normal, normals[k])) for c in pairs) \
+        == [0, 1]
+    assert sum(c.force for c in pairs)[2] == pytest.approx(-0.02, rel=1e-4)

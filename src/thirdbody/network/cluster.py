@@ -650,11 +650,12 @@ class _Problem:
                                 for new, prev in ((A, old.a), (B, old.b)))
                 if parts:
                     # a pair split into contacts facing different ways: each keeps its own
-                    # minimum of the gap (a scan would find the deepest for every one)
+                    # minimum of the gap (a scan would find the deepest for every one); the
+                    # pair's first contact, if it opened, is looked for anew (the deepest)
                     if near is None and hist is not None:
                         near = _moved_point(hist[1], A, B)[1]
-                    closest = None if near is None else \
-                        closest_approach(A, B, normal=guess, near=near, local=True)
+                    closest = closest_approach(A, B, normal=guess, near=near,
+                                               local=near is not None)
                     todo.append((key, roles, hist, A, B, closest, warm, parts))
                     continue
                 closest = closest_approach(A, B, normal=guess, near=near)
@@ -689,14 +690,18 @@ class _Problem:
             self.timings["narrow"] += t2 - t1
             for key, roles, hist, A, B, closest, warm, parts in todo:
                 members = []            # (key, closest approach, history or None, warm or None)
-                if closest is not None and closest.separation < 0:
-                    members.append((key, closest, None if hist is None else hist[1], warm))
                 for part in parts:
                     found = self._part_approach(part, A, B, last)
                     if found is not None and found.separation < 0:
                         old = self.histories.get(part)
                         members.append((part, found, None if old is None else old[1],
                                         last.get(part)))
+                if closest is not None and closest.separation < 0:
+                    # first, unless it was found anew: then a known contact at the same place
+                    # keeps its key and history
+                    first = hist is not None or warm is not None
+                    members.insert(0 if first else len(members),
+                                   (key, closest, None if hist is None else hist[1], warm))
                 members = _distinct(members, min(A.size, B.size))
                 count = 1 + max((p[3] for p in parts), default=0)
                 for _ in range(_SPLIT_ROUNDS):
