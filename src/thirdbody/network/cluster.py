@@ -18,8 +18,9 @@ model of each contact as the tangent.** One iteration:
    separation (that of the bounding spheres when these are apart). A pair that touches on
    spots facing different ways (a non-convex particle: a sphere on two bumps) is split into
    one contact per spot, each with its own closest points, frame, history and model, when a
-   spot faces away from the contact's normal by more than tan⁻¹ of the half-space limit
-   (:attr:`~thirdbody.network.PairContact.facing`): keys ``(k, m, image)`` and
+   spot is a minimum of the gap of its own, faces away from the contact's normal and lies
+   apart from it (:attr:`~thirdbody.network.PairContact.facing`,
+   :data:`~thirdbody.network.contact.SPLIT_TILT`): keys ``(k, m, image)`` and
    ``(k, m, image, s)``, s = 1, 2, ...; each is found again by a local search from its last
    solve, and the surfaces are shared out by the bisecting planes of their closest points
    (``others`` of :func:`~thirdbody.network.solve_contact`). The tangential problem

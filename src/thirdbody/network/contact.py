@@ -8,9 +8,10 @@ below and b above. The gap is b's lower surface minus a's upper surface along th
 vertical rays, measured from first touch, over every cell that can touch
 (:mod:`~thirdbody.network.window`); several spots share the frame of the deepest one and one
 rigid approach along its normal, as the spots of a plate do. A spot that faces elsewhere (a
-non-convex body touching on two bumps) is measured (``spot_tilt``) and, past tan⁻¹ of the
-half-space limit, handed on with its own closest approach (``facing``): a cluster then solves
-one contact per spot, each on its share of the surfaces (``others``). Both bodies are elastic
+non-convex body touching on two bumps) is measured (``spot_tilt``) and, when it is a minimum
+of the gap of its own, tilted by more than :data:`SPLIT_TILT` and :data:`SPLIT_DISTANCE`
+contact radii away, handed on with its own closest approach (``facing``): a cluster then
+solves one contact per spot, each on its share of the surfaces (``others``). Both bodies are elastic
 half-spaces with the pair's compliance (:meth:`ElasticPair.of`: 1/E* = Σ (1 − ν_i²)/E_i,
 1/G = Σ 1/G_i; Johnson 1985, §4.2 and §7.2): the frame's problem is the plate solvers' problem
 with b in the role of the plate. Normal and tangential problems are uncoupled (Goodman's
@@ -79,6 +80,18 @@ from .narrow import Approach, _smoothing, _stencil, closest_approach
 from .window import Lattice, carry_field, ring, union, window_around, window_gap
 
 __all__ = ["HALF_SPACE_LIMIT", "HalfSpaceWarning", "PairContact", "solve_contact"]
+
+#: A spot of a contact that is a minimum of the gap of its own, faces away from the contact's
+#: normal by more than SPLIT_TILT (rad) and lies more than SPLIT_DISTANCE contact radii (the
+#: larger spot's) from its closest points is handed on as a contact of its own
+#: (:attr:`PairContact.facing`). Kept in the deepest spot's frame, such a spot's force is taken
+#: along the wrong normal (friction carries tan(tilt) of it), and a pair touching on two equal
+#: bumps flips its frame from one to the other as the bodies move: a sphere of 8 mm on a
+#: potato's two bumps (normals 4.4° apart) found no equilibrium so, nor one of 30 mm (1.2°);
+#: split, 8 and 18 passes (tests/test_network_spot_tilt.py). Split, the spots lose their elastic coupling, about 4a/(3πd) of the
+#: approach for spots d apart (a point load's far field, Johnson 1985 §3.2): 0.1 at 4 radii.
+SPLIT_TILT = 1e-3
+SPLIT_DISTANCE = 4.0
 
 #: contact radius / smallest radius of curvature beyond which a HalfSpaceWarning is emitted.
 #: Two spheres with their exact gap depart from Hertz by about −0.1 (a/R)² in force at a given
@@ -179,9 +192,11 @@ class PairContact:
     closest : Approach
         The narrow phase's result.
     facing : tuple of Approach
-        The local closest approaches of the spots that face away from :attr:`normal` by more
-        than tan⁻¹ of the half-space limit: where a cluster splits the pair into one contact
-        per spot (``others`` of :func:`solve_contact`).
+        The local closest approaches of the spots that are contacts of their own: separate
+        minima of the gap facing away from :attr:`normal` by more than :data:`SPLIT_TILT` and
+        farther than :data:`SPLIT_DISTANCE` contact radii from the closest points. A cluster
+        splits the pair there into one contact per spot (``others`` of
+        :func:`solve_contact`).
     methods : tuple of str
         Published methods behind the result (:func:`thirdbody.citations`).
     """
@@ -301,9 +316,10 @@ def _curvatures(a: Body, b: Body, frame, origin) -> tuple[np.ndarray, np.ndarray
 
 
 def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
-                  spots: int) -> list[tuple[float, Approach | None]]:
+                  spots: int, cell_area: float) -> list[tuple[float, Approach | None, bool]]:
     """Each spot's angle (rad) between its own common normal and the frame's, with the local
-    closest approach that gave it (or None), the spot holding the frame origin left out.
+    closest approach that gave it (or None) and whether the spot is a contact of its own
+    (:data:`SPLIT_TILT`, :data:`SPLIT_DISTANCE`), the spot holding the frame origin left out.
 
     A spot's own normal is the common normal of the surfaces' local closest points there: the
     narrow phase's local search (``closest_approach(local=True)``) started at the spot's
@@ -317,6 +333,7 @@ def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
         return []
     home = int(labels.ravel()[int(np.argmin((X * X + Y * Y).ravel()))])
     t1, t2 = frame.inv().apply(np.eye(3)[:2])
+    counts = np.bincount(labels.ravel(), minlength=spots + 1)
     out = []
     for spot in range(1, spots + 1):
         if spot == home:
@@ -343,7 +360,10 @@ def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
             tilt = math.atan2(float(np.linalg.norm(np.cross(own, n))), float(own @ n))
         else:
             found = None
-        out.append((tilt, found))
+        radius = math.sqrt(max(counts[spot], counts[home]) * cell_area / math.pi)
+        apart = found is not None and tilt > SPLIT_TILT and \
+            float(np.linalg.norm(found.midpoint - origin)) > SPLIT_DISTANCE * radius
+        out.append((tilt, found, apart))
     return out
 
 
@@ -759,9 +779,9 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
             f"contact radius / radius of curvature = {ratio:.3g} > {limit:.3g}: the half-space "
             f"model of the contact is out of its range (a = {radius:.3g} m, R = "
             f"{curvature:.3g} m)"), stacklevel=3)
-    normals = _spot_normals(a, b, frame, origin, n, X, Y, p, labels, spots)
-    tilt = max((t for t, _ in normals), default=0.0)
-    facing = tuple(found for t, found in normals if found is not None and math.tan(t) > limit)
+    normals = _spot_normals(a, b, frame, origin, n, X, Y, p, labels, spots, dA)
+    tilt = max((t for t, _, _ in normals), default=0.0)
+    facing = tuple(found for _, found, apart in normals if apart)
     if math.tan(tilt) > limit:
         warnings.warn(HalfSpaceWarning(
             f"a spot of the contact faces {math.degrees(tilt):.3g}° away from its normal "
