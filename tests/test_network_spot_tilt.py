@@ -17,9 +17,8 @@ import pytest
 from scipy.optimize import brentq, minimize_scalar
 
 import thirdbody as tb
-from thirdbody.network import Body
+from thirdbody.network import Body, contact
 from thirdbody.network.cluster import ClusterNumerics, solve_cluster
-from thirdbody.network import contact
 from thirdbody.network.contact import HALF_SPACE_LIMIT, HalfSpaceWarning, solve_contact
 from thirdbody.network.narrow import closest_approach
 from thirdbody.shapes import Sphere
@@ -133,7 +132,7 @@ def test_spots_closer_than_split_distance_radii_stay_one_contact(monkeypatch, fa
     spots' radius is a (the larger's: ``contact_radius``); with SPLIT_DISTANCE set just below
     d/a the spot is handed on, just above it stays (elastic coupling 4a/(3πd) too strong to
     drop)."""
-    a, b, bumps = placed(3e-3, 2e-6)
+    a, b, _ = placed(3e-3, 2e-6)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", HalfSpaceWarning)
         c = solve_contact(a, b, mu=0.3, spacing=a.size / 60)

@@ -88,8 +88,9 @@ __all__ = ["HALF_SPACE_LIMIT", "HalfSpaceWarning", "PairContact", "solve_contact
 #: along the wrong normal (friction carries tan(tilt) of it), and a pair touching on two equal
 #: bumps flips its frame from one to the other as the bodies move: a sphere of 8 mm on a
 #: potato's two bumps (normals 4.4° apart) found no equilibrium so, nor one of 30 mm (1.2°);
-#: split, 8 and 18 passes (tests/test_network_spot_tilt.py). Split, the spots lose their elastic coupling, about 4a/(3πd) of the
-#: approach for spots d apart (a point load's far field, Johnson 1985 §3.2): 0.1 at 4 radii.
+#: split, 8 and 18 passes (tests/test_network_spot_tilt.py). Split, the spots lose their
+#: elastic coupling, about 4a/(3πd) of the approach for spots d apart (a point load's far
+#: field, Johnson 1985 §3.2): 0.1 at 4 radii.
 SPLIT_TILT = 1e-3
 SPLIT_DISTANCE = 4.0
 
