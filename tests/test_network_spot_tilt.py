@@ -209,12 +209,13 @@ def check_two_contacts(result, radius: float, force: float, potato: int, sphere:
     return pairs
 
 
-@pytest.mark.parametrize("radius", [8e-3, 3e-3, 1e-3])
+@pytest.mark.parametrize("radius", [30e-3, 8e-3, 3e-3, 1e-3])
 def test_a_sphere_on_two_bumps_rests_on_two_contacts_facing_their_own_ways(radius):
     """Solved by the cluster (0.02 N, 60 cells per size): the pair is split into two contacts,
-    each with its own frame. One frame for both found no equilibrium for the sphere of 8 mm
-    (bumps' normals 4.4° apart) and of 1 mm (28.8°), and on the sphere of 3 mm (stop 44) leaned
-    5.6° and made friction carry tan 5.6° of the load; now 8, 8 and 23 passes, 1-2 s each."""
+    each with its own frame. One frame for both found no equilibrium for the spheres of 30 mm,
+    8 mm and 1 mm (bumps' normals 1.2°, 4.4° and 28.8° apart), and on the sphere of 3 mm
+    (stop 44) leaned 5.6° and made friction carry tan 5.6° of the load; now 18, 8, 8 and 23
+    passes, 1-4 s each."""
     with warnings.catch_warnings():
         warnings.simplefilter("error", HalfSpaceWarning)
         result = solve_cluster(on_the_lower_plate(radius), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
@@ -312,3 +313,20 @@ def test_a_split_pair_whose_first_contact_opened_is_found_again():
     assert sorted(min(range(2), key=lambda k: angle(c.normal, normals[k])) for c in pairs) \
         == [0, 1]
     assert sum(c.force for c in pairs)[2] == pytest.approx(-0.02, rel=1e-4)
+
+
+def test_two_searches_that_end_at_one_minimum_are_one_contact():
+    """Split contacts whose closest points lie within 1e-3 of the smaller size of an earlier
+    one's (or of a contact already known) are dropped: the same minimum found twice."""
+    from types import SimpleNamespace as NS
+
+    from thirdbody.network.cluster import _distinct
+
+    def member(name, x):
+        return (name, NS(midpoint=np.array([1e-3 + x, 2e-3, 0.5e-3])))
+
+    members = [member("a", 0.0), member("b", 0.9e-6), member("c", 2e-6), member("d", -1.1e-6)]
+    assert [m[0] for m in _distinct(members, 1e-3)] == ["a", "c", "d"]
+    known = [member("", 2.5e-6)[1]]
+    assert [m[0] for m in _distinct(members, 1e-3, known)] == ["a", "d"]
+    assert [m[0] for m in _distinct(members, 1e-2)] == ["a"]
