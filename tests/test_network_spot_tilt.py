@@ -163,7 +163,8 @@ def test_a_spot_deeper_along_the_frame_than_along_its_own_normal_is_named():
     a, b, bumps = placed(1e-3, 0.0)
     assert min(o for o, _ in bumps) > 0.5 * DEPTH
     assert math.degrees(angle(bumps[0][1], bumps[1][1])) > 25
-    with pytest.raises(RuntimeError, match="spots facing different ways are not modelled"):
+    with pytest.raises(RuntimeError, match="second spot of a non-convex pair that one contact "
+                                           "frame cannot hold"):
         solve_contact(a, b, mu=0.3, spacing=a.size / 60)
 
 

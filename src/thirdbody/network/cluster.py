@@ -714,9 +714,10 @@ class _Problem:
                         solves += 1
                         if out is not None:
                             done.append(out)
-                    # spots of a contact that face away from it by more than the half-space
-                    # limit become contacts of their own (keys (k, m, image, s)), and the pair
-                    # is solved again on its parts
+                    # spots of a contact that are minima of the gap of their own, facing away
+                    # from it and apart from it (PairContact.facing), become contacts of
+                    # their own (keys (k, m, image, s)), and the pair is solved again on its
+                    # shares
                     new = [f for d in done for f in d.contact.facing]
                     new = _distinct([(None, f, None, None) for f in new], min(A.size, B.size),
                                     [c for _, c, _, _ in members])
@@ -2116,7 +2117,8 @@ def _beyond_half_space(problem: _Problem, ev: _Evaluation) -> str:
                 f"half-space model's range: lower the load or the compression")
     if math.tan(tilt) > limit:
         out += (f"; contact {tilted} has a spot facing {math.degrees(tilt):.3g}° away from its "
-                f"normal: spots facing different ways (non-convex particles) are not modelled")
+                f"normal, kept in its frame (too close to be a contact of its own): its force "
+                f"is taken along that normal")
     problem.beyond = out or problem.beyond
     return out
 

@@ -730,7 +730,7 @@ def _deeper_cell(lattice: Lattice, i: int, j: int) -> str:
         if tilt > 1.0:
             return (f"there the surfaces face {tilt:.3g}° away from the contact's normal, a "
                     f"second spot of a non-convex pair that one contact frame cannot hold "
-                    f"(spots facing different ways are not modelled)")
+                    f"(solve_cluster solves such a spot as a contact of its own)")
     return "the narrow phase missed a deeper minimum of the gap"
 
 
