@@ -21,6 +21,7 @@ from thirdbody.network import Body, contact
 from thirdbody.network.cluster import ClusterNumerics, solve_cluster
 from thirdbody.network.contact import HALF_SPACE_LIMIT, HalfSpaceWarning, solve_contact
 from thirdbody.network.narrow import closest_approach
+from thirdbody.orientation import Rotation
 from thirdbody.shapes import Sphere
 from thirdbody.shapes.potato import Potato, Wave
 
@@ -331,3 +332,54 @@ def test_two_searches_that_end_at_one_minimum_are_one_contact():
     known = [member("", 2.5e-6)[1]]
     assert [m[0] for m in _distinct(members, 1e-3, known)] == ["a", "d"]
     assert [m[0] for m in _distinct(members, 1e-2)] == ["a"]
+
+
+@pytest.mark.parametrize("radius", [3e-3, 1e-3])
+def test_the_tilt_does_not_depend_on_the_frames_tangent_axes(radius):
+    """The sphere turned by 60° about z: the same geometry, but the contact frame's tangent
+    axes (from both bodies' x axes) turn by 30°, so the bumps no longer lie along a frame
+    axis. The same tilt and the same normal of the other spot, and for the sphere of 1 mm the
+    same angle named at the deeper cell (a little below the bumps' 28.8°: that cell is not
+    the other bump's closest point)."""
+    a, b, _ = placed(radius, 3e-6 if radius > 2e-3 else 0.0)
+    B = b.moved(rotation=Rotation.from_euler("z", 60, degrees=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        if radius < 2e-3:
+            named = []
+            for sphere in (b, B):
+                with pytest.raises(RuntimeError) as error:
+                    solve_contact(a, sphere, mu=0.3, spacing=a.size / 60)
+                named.append(float(str(error.value).split("face ")[1].split("°")[0]))
+            reference = math.degrees(angle(*[n for _, n in bump_contacts(b.centre, radius)]))
+            assert named[1] == pytest.approx(named[0], abs=0.5)
+            assert 0.9 * reference < min(named) and max(named) < reference + 0.05   # 3 digits
+            return
+        c = solve_contact(a, b, mu=0.3, spacing=a.size / 60)
+        C = solve_contact(a, B, mu=0.3, spacing=a.size / 60)
+    assert abs(C.tangent_axes[0] @ c.tangent_axes[0]) < 0.9          # the frames differ
+    assert C.spot_tilt == pytest.approx(c.spot_tilt, rel=1e-6)
+    assert angle(C.facing[0].normal, c.facing[0].normal) < 1e-6
+
+
+def test_without_the_local_search_the_tilt_is_the_slope_at_the_spots_centroid(monkeypatch):
+    """Where the local search from a spot fails, its tilt is the surfaces' mean slope at its
+    pressure centroid (within a cell of its closest points: 2.7 % off the reference here) and
+    the spot is not handed on."""
+    a, b, bumps = placed(3e-3, 3e-6)
+    reference = angle(bumps[0][1], bumps[1][1])
+    found = []
+
+    def failing(*args, local=False, **kwargs):
+        if local:
+            found.append(kwargs["near"])
+            return None
+        return closest_approach(*args, **kwargs)
+
+    monkeypatch.setattr(contact, "closest_approach", failing)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        c = solve_contact(a, b, mu=0.3, spacing=a.size / 60)
+    assert len(found) == 1 and c.facing == ()
+    assert c.spot_tilt == pytest.approx(reference, rel=0.04)
+    assert abs(c.spot_tilt / reference - 1) > 1e-3            # not the local search's value
