@@ -11,13 +11,14 @@ cases, each solved by ``solve_cluster`` under force control (μ = 0.3 everywhere
   few µm on the bumps at 0.002 N, cells of 22 µm at 40 per size): the lattice is relative to
   the centroid, so the bump tops lie between cell centres and a small approach reaches none.
 * ``sphere``: a sphere of radius ``--radius`` (m, several allowed) resting on both bumps, the
-  upper plate pressing it with ``--force``. The pair contact has two spots whose own normals
-  lean ± asin(x_bump/(R + r_bump)) from the vertical; the pair solve puts both in the frame
-  of the deepest one (:mod:`thirdbody.network.contact`), so its normal leans by that angle
-  and a vertical pair force needs a tangential force of tan(lean) N that the true contact
-  (two normals, symmetric) does not. Printed: converged or not, passes, the pair normal's
-  lean, how far the other spot faces from it (``spot_tilt``), the pair force's tangential
-  share, the sphere's sideways translation.
+  upper plate pressing it with ``--force``. The pair touches on two spots whose own normals
+  lean ± asin(x_bump/(R + r_bump)) from the vertical. The cluster splits the pair into one
+  contact per spot (:data:`thirdbody.network.contact.SPLIT_TILT`), each along its own normal;
+  until stop 45 one frame, the deepest spot's, held both, so the pair normal leaned by that
+  angle and friction carried tan(lean) of the load (or no equilibrium was found). Printed per
+  pair contact: its normal force, its normal's lean in x, its |T|/N, its spots and the tilt
+  of any spot left in its frame (``spot_tilt``); the pair forces' sum on the potato; passes;
+  the sphere's sideways translation.
 
     .venv/bin/python benchmarks/two_spots.py plates --cells 40 80 160
     .venv/bin/python benchmarks/two_spots.py sphere --radius 1e-3 3e-3 --force 0.02 --cells 60
