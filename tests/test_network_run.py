@@ -794,3 +794,26 @@ def test_a_guessed_gap_is_never_below_half_the_last_one():
 
     last = _last()._replace(gap=-8e-4)
     assert _predicted(last, LoadStep("force", 3.0), 1e-3)[2] == 5e-4
+
+
+def test_a_neighbour_touched_on_split_contacts_counts_once():
+    """Particle 0 touches 1 on two contacts (a split pair: keys (0, 1, (0, 0)) and
+    (0, 1, (0, 0), 1)), 1 also touches 2 across the x side, and 0 touches the lower plate on
+    one contact; an unloaded pair contact does not count."""
+    from types import SimpleNamespace as NS
+
+    from thirdbody.network.run import _neighbours
+
+    def contact(key, N=1.0):
+        return NS(key=key, i=key[0], j=key[1], normal_force=N)
+
+    contacts = [contact((0, 1, (0, 0))), contact((0, 1, (0, 0), 1)),
+                contact((1, 2, (1, 0))), contact((0, "lower")), contact((0, 2, (0, 0)), 0.0)]
+    touching = [[], [], []]
+    for c in contacts:
+        if c.normal_force > 0:
+            touching[c.i].append(c)
+            if not isinstance(c.j, str):
+                touching[c.j].append(c)
+    degree, pairs = _neighbours(touching, contacts)
+    assert degree == [2, 2, 1] and pairs == 2

@@ -499,9 +499,7 @@ class NetworkEngine:
                 plate[c.i][c.j] = c
             else:
                 touching[c.j].append(c)
-        # a neighbour touched on contacts facing different ways (keys (i, j, image, s)) counts
-        # once, as a plate touched on several spots does
-        degree = [len({c.key[:3] for c in t}) for t in touching]
+        degree, neighbours = _neighbours(touching, result.contacts)
         records = []
         for i, body in enumerate(result.bodies):
             records.append(self._particle(k, step, i, body, result, starts[i], plate[i],
@@ -509,7 +507,6 @@ class NetworkEngine:
         loaded = [i for i in range(n) if records[i].state != "unloaded"]
         m = max(len(loaded), 1)
         both = [i for i in loaded if "upper" in plate[i] and "lower" in plate[i]]
-        pairs = [c for c in result.contacts if not isinstance(c.j, str) and c.normal_force > 0]
         total = result.normal_force
         for r in records:
             r.values["load_share"] = r.normal_force / total if total > 0 else 0.0
@@ -522,7 +519,7 @@ class NetworkEngine:
             fraction_roll=sum(s in ("roll_upper", "roll_lower", "roll") for s in states) / m,
             fraction_rotate=states.count("rotate") / m,
             fraction_slide=sum(s in schema.SLIDING for s in states) / m,
-            particle_contacts=len({c.key[:3] for c in pairs}),
+            particle_contacts=neighbours,
             coordination=(math.fsum(degree[i] for i in loaded) / len(loaded)
                           if loaded else math.nan),
             both_plates_force=math.fsum(plate[i]["upper"].normal_force for i in both),
@@ -615,6 +612,16 @@ class NetworkEngine:
             "contact_mu": float(c.mu),
             "contact_elastic_energy": stored, "contact_dissipation": dissipated,
         }
+
+
+def _neighbours(touching: list, contacts) -> tuple[list[int], int]:
+    """Each particle's number of contacts (``touching``: its loaded contacts) and the number of
+    touching particle pairs carrying load. A neighbour touched on contacts facing different
+    ways (keys (i, j, image) and (i, j, image, s)) counts once, as a plate touched on several
+    spots does."""
+    degree = [len({c.key[:3] for c in t}) for t in touching]
+    pairs = {c.key[:3] for c in contacts if not isinstance(c.j, str) and c.normal_force > 0}
+    return degree, len(pairs)
 
 
 def particle_state(kinematics: str, turned: bool, contact_states: list[str],
