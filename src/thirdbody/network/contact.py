@@ -316,8 +316,23 @@ def _curvatures(a: Body, b: Body, frame, origin) -> tuple[np.ndarray, np.ndarray
     return st[0][2], st[1][2]
 
 
-def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
-                  spots: int, cell_area: float) -> list[tuple[float, Approach | None, bool]]:
+def _centroid(w: np.ndarray, X: np.ndarray, Y: np.ndarray) -> np.ndarray:
+    """The centroid (x, y) of the cell weights ``w`` (pressures) on the cell coordinates X, Y,
+    m (exact ``math.fsum`` sums)."""
+    total = math.fsum(w.ravel())
+    return np.array([math.fsum((w * X).ravel()) / total, math.fsum((w * Y).ravel()) / total])
+
+
+def _slope_tilt(st) -> tuple[np.ndarray, float]:
+    """The mean slope ½(g_a + g_b) of both surfaces in a :func:`_surfaces_at` stencil and the
+    angle (rad) by which a normal of that slope is tilted from the frame's."""
+    slope = 0.5 * (st[0][1] + st[1][1])
+    return slope, math.atan(float(np.hypot(*slope)))
+
+
+def _spot_normals(a: Body, b: Body, frame, origin, n, axes, X, Y, p, labels, spots: int,
+                  counts: np.ndarray, cell_area: float) -> list[tuple[float, Approach | None,
+                                                                  bool]]:
     """Each spot's angle (rad) between its own common normal and the frame's, with the local
     closest approach that gave it (or None) and whether the spot is a contact of its own
     (:data:`SPLIT_TILT`, :data:`SPLIT_DISTANCE`), the spot holding the frame origin left out.
@@ -333,24 +348,20 @@ def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
     if spots < 2:
         return []
     home = int(labels.ravel()[int(np.argmin((X * X + Y * Y).ravel()))])
-    t1, t2 = frame.inv().apply(np.eye(3)[:2])
-    counts = np.bincount(labels.ravel(), minlength=spots + 1)
+    t1, t2 = axes
     out = []
     for spot in range(1, spots + 1):
         if spot == home:
             continue
-        w = np.where(labels == spot, p, 0.0).ravel()
-        total = math.fsum(w)
-        if not total > 0:
+        w = np.where(labels == spot, p, 0.0)
+        if not math.fsum(w.ravel()) > 0:
             continue
-        xc = math.fsum(w * X.ravel()) / total
-        yc = math.fsum(w * Y.ravel()) / total
+        xc, yc = _centroid(w, X, Y)
         point = origin + xc * t1 + yc * t2
         st = _surfaces_at(a, b, frame, point)
         if st is None:
             continue
-        slope = 0.5 * (st[0][1] + st[1][1])
-        tilt = math.atan(float(np.hypot(*slope)))
+        slope, tilt = _slope_tilt(st)
         guess = frame.inv().apply(np.array([-slope[0], -slope[1], 1.0]))
         found = closest_approach(a, b, normal=guess, near=point, local=True)
         # its normal to 1e-6 rad (a shallow pair, two flat surfaces, may not meet the search's
@@ -368,8 +379,10 @@ def _spot_normals(a: Body, b: Body, frame, origin, n, X, Y, p, labels,
     return out
 
 
-def _radii(hessian: np.ndarray) -> np.ndarray:
-    kappa = np.linalg.eigvalsh(hessian)
+def _radii(curvature: np.ndarray) -> np.ndarray:
+    """Principal radii of curvature (m, signed: positive convex, inf where flat) of a
+    curvature tensor (1/m)."""
+    kappa = np.linalg.eigvalsh(curvature)
     with np.errstate(divide="ignore"):
         return np.where(kappa != 0, 1.0 / np.where(kappa != 0, kappa, 1.0), np.inf)
 
@@ -726,7 +739,7 @@ def _deeper_cell(lattice: Lattice, i: int, j: int) -> str:
     point = lattice.origin + lattice.spacing * (i * t1 + j * t2)
     st = _surfaces_at(lattice.a, lattice.b, lattice.frame, point)
     if st is not None:
-        tilt = math.degrees(math.atan(float(np.hypot(*(0.5 * (st[0][1] + st[1][1]))))))
+        tilt = math.degrees(_slope_tilt(st)[1])
         if tilt > 1.0:
             return (f"there the surfaces face {tilt:.3g}° away from the contact's normal, a "
                     f"second spot of a non-convex pair that one contact frame cannot hold "
@@ -766,12 +779,11 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
     moment_b = _fsum(np.cross(cells - b.centre, -on_a))
     force_n = math.fsum(p.ravel()) * dA
     tangential_force = _fsum(traction_world * dA)
-    xc = math.fsum((p * X).ravel()) / math.fsum(p.ravel())
-    yc = math.fsum((p * Y).ravel()) / math.fsum(p.ravel())
+    xc, yc = _centroid(p, X, Y)
     area = normal.area
     labels, spots = ndimage.label(normal.contact, structure=np.ones((3, 3), dtype=bool))
-    largest = int(np.bincount(labels.ravel())[1:].max()) * dA
-    radius = math.sqrt(largest / math.pi)
+    counts = np.bincount(labels.ravel())
+    radius = math.sqrt(int(counts[1:].max()) * dA / math.pi)
     radii_a, radii_b = _radii(-Ha), _radii(Hb)
     curvature = float(np.abs(np.concatenate([radii_a, radii_b])).min())
     ratio = radius / curvature
@@ -780,7 +792,8 @@ def _result(a, b, closest, separation, frame, origin, n, normal, tangential, Ha,
             f"contact radius / radius of curvature = {ratio:.3g} > {limit:.3g}: the half-space "
             f"model of the contact is out of its range (a = {radius:.3g} m, R = "
             f"{curvature:.3g} m)"), stacklevel=3)
-    normals = _spot_normals(a, b, frame, origin, n, X, Y, p, labels, spots, dA)
+    normals = _spot_normals(a, b, frame, origin, n, (t1, t2), X, Y, p, labels, spots, counts,
+                            dA)
     tilt = max((t for t, _, _ in normals), default=0.0)
     facing = tuple(found for _, found, apart in normals if apart)
     if math.tan(tilt) > limit:

@@ -54,7 +54,7 @@ from ..bem import (
 )
 from ..particle.interface import Window, remap
 from .body import Body
-from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, _solve_normal
+from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, _centroid, _radii, _solve_normal
 from .narrow import _smoothing
 from .window import Lattice, occupied
 
@@ -258,14 +258,6 @@ def _curvature(body: Body, side: str, point: np.ndarray, size: float) -> np.ndar
                        "contact")
 
 
-def _radii(curvature: np.ndarray) -> np.ndarray:
-    """Principal radii of curvature (m, signed: positive convex, inf where flat) of a
-    curvature tensor (1/m)."""
-    kappa = np.linalg.eigvalsh(curvature)
-    with np.errstate(divide="ignore"):
-        return np.where(kappa != 0, 1.0 / np.where(kappa != 0, kappa, 1.0), np.inf)
-
-
 def _touch(body: Body, side: str, plate: float) -> np.ndarray:
     extreme = (body.shape.lowest_point(body.rotation) if side == "lower"
                else body.shape.highest_point(body.rotation))
@@ -430,9 +422,7 @@ def _result(body, side, plate, window, normal, tangential, lever, increment, twi
     radii = _radii(curvature)
     if spots > 1:
         # the largest spot's own pressure centroid (the first of equal ones)
-        w = np.where(labels == int(np.argmax(counts)) + 1, p, 0.0)
-        own = np.array([math.fsum((w * X).ravel()), math.fsum((w * Y).ravel())]) \
-            / math.fsum(w.ravel())
+        own = _centroid(np.where(labels == int(np.argmax(counts)) + 1, p, 0.0), X, Y)
         curvature_radius = float(np.abs(_radii(_curvature(body, side, own, body.size))).min())
     else:
         curvature_radius = float(np.abs(radii).min())
