@@ -383,3 +383,27 @@ def test_without_the_local_search_the_tilt_is_the_slope_at_the_spots_centroid(mo
     assert len(found) == 1 and c.facing == ()
     assert c.spot_tilt == pytest.approx(reference, rel=0.04)
     assert abs(c.spot_tilt / reference - 1) > 1e-3            # not the local search's value
+
+
+@pytest.mark.parametrize("mu_pp", [1e-3, 1e-2])
+def test_nearly_frictionless_split_contacts_slide_and_carry_the_load_as_statics_says(mu_pp):
+    """With little friction between the particles both contacts slide (|T| = μN), friction
+    pointing up each bump's slope against the sphere's descent, so the sphere's balance gives
+    each contact N = F / (2 (cos θ + μ sin θ)) with θ its bump's lean (from the radial
+    function). μ_pp = 0 exactly fails, split or not: in the first pass the pair carries 3e-5 N
+    (one cell) against the plate's 0.055 N and the Newton step lifts the sphere 150 µm away
+    (the first load step's one-cell mechanism, docs/methods/network.md)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", HalfSpaceWarning)
+        result = solve_cluster(on_the_lower_plate(3e-3), mu_up=0.3, mu_low=0.3, mu_pp=mu_pp,
+                               force=0.02, numerics=ClusterNumerics(resolution=60, tol=1e-5))
+    pairs = check_two_contacts(result, 3e-3, 0.02, 0, 1)
+    P, S = result.bodies
+    normals = [n for _, n in bump_contacts(P.rotation.inv().apply(S.centre - P.centre), 3e-3)]
+    theta = 0.5 * angle(*normals)
+    for c in pairs:
+        assert c.sliding
+        assert np.linalg.norm(c.tangential_force) == pytest.approx(mu_pp * c.normal_force,
+                                                                   rel=1e-6)
+        assert c.normal_force == pytest.approx(
+            0.02 / (2 * (math.cos(theta) + mu_pp * math.sin(theta))), rel=1e-4)
