@@ -669,22 +669,12 @@ class _Problem:
                     # bounding spheres apart: the separation is at least their gap (exactly it
                     # for spheres), along the line of the centres
                     n = d / distance
-                    pair = ElasticPair.of(A.material, B.material)
-                    ma, mb = A.material, B.material
-                    potential.append(_Potential(
-                        roles, sigma, n, A.centre + (A.size + 0.5 * sigma) * n, A.centre,
-                        B.centre, pair.E_star,
-                        0.5 * min(A.shape.feature_length, B.shape.feature_length),
-                        (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles)))
+                    potential.append(self._pair_potential(
+                        roles, A, B, sigma, n, A.centre + (A.size + 0.5 * sigma) * n))
                     continue
                 if not closest.separation < 0:
-                    pair = ElasticPair.of(A.material, B.material)
-                    ma, mb = A.material, B.material
-                    potential.append(_Potential(
-                        roles, closest.separation, closest.normal, closest.midpoint, A.centre,
-                        B.centre, pair.E_star,
-                        0.5 * min(A.shape.feature_length, B.shape.feature_length),
-                        (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles)))
+                    potential.append(self._pair_potential(
+                        roles, A, B, closest.separation, closest.normal, closest.midpoint))
                     continue
                 todo.append((key, roles, hist, A, B, closest, warm, ()))
             t2 = time.perf_counter()
@@ -734,6 +724,15 @@ class _Problem:
         scale = math.fsum(normals) / len(normals) if normals else 0.0
         return _Evaluation(np.array(centres, dtype=float), list(rotations), h, contacts,
                            potential, forces, moments, math.fsum(upper), scale, solves)
+
+    def _pair_potential(self, roles, A: Body, B: Body, sigma: float, normal, point):
+        """An open pair contact, σ (m) apart along ``normal`` at ``point``: the pair's contact
+        modulus, half the smaller feature length as its radius, Σ (2 − ν)/G and μ_pp."""
+        ma, mb = A.material, B.material
+        return _Potential(roles, sigma, normal, point, A.centre, B.centre,
+                          ElasticPair.of(ma, mb).E_star,
+                          0.5 * min(A.shape.feature_length, B.shape.feature_length),
+                          (2.0 - ma.nu) / ma.G + (2.0 - mb.nu) / mb.G, self.pair_mu(*roles))
 
     def _solve_pair(self, key, roles, A, B, closest, previous, warm, others):
         """One pair contact solved at these poses (its share of the step, kinematics, the BEM
