@@ -227,12 +227,13 @@ def test_a_sphere_on_two_bumps_rests_on_two_contacts_facing_their_own_ways(radiu
 
 @pytest.mark.slow
 def test_split_contacts_keep_their_keys_and_histories_over_load_steps():
-    """The sphere of 3 mm listed first (the solver's order is not the user's) and loaded in 4
-    equal steps to 0.02 N with the histories carried: at every step the same two keys and the
-    checks above. The tangential force grows with the history of each contact: below what the
-    whole load in one step gives (the friction of a contact loaded obliquely in one go), and
-    above Mindlin-Deresiewicz's 2(1 − ν)/(2 − ν) tan θ of a circular contact loaded along a
-    fixed oblique direction in infinitely many steps (0.081 here)."""
+    """The sphere of 3 mm listed first (the solver's order is not the user's), loaded in 4
+    equal steps to 0.02 N and unloaded in 2 to 0.01 N with the histories carried: at every
+    step the same two keys and the checks above. At the peak, the tangential force that grew
+    with each contact's history is below what the whole load in one step gives (the friction
+    of a contact loaded obliquely in one go), and above Mindlin-Deresiewicz's
+    2(1 − ν)/(2 − ν) tan θ of a circular contact loaded along a fixed oblique direction in
+    infinitely many steps (0.081 here)."""
     numerics = ClusterNumerics(resolution=60, tol=1e-5)
     potato, sphere = on_the_lower_plate(3e-3)
     bodies, histories, gap = [sphere, potato], {}, None
@@ -241,14 +242,24 @@ def test_split_contacts_keep_their_keys_and_histories_over_load_steps():
         warnings.simplefilter("error", HalfSpaceWarning)
         whole = solve_cluster(bodies, mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=0.02,
                               numerics=numerics)
-        for k in range(1, 5):
+        ratios = []
+        for force in (0.005, 0.01, 0.015, 0.02, 0.015, 0.01):
             result = solve_cluster(bodies, histories, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
-                                   force=0.005 * k, gap_start=gap, numerics=numerics)
-            pairs = check_two_contacts(result, 3e-3, 0.005 * k, 1, 0)
+                                   force=force, gap_start=gap, numerics=numerics)
+            pairs = check_two_contacts(result, 3e-3, force, 1, 0)
             assert keys is None or [c.key for c in pairs] == keys
             keys = [c.key for c in pairs]
             bodies, histories, gap = list(result.bodies), result.histories, result.gap
-    ratio = [np.linalg.norm(c.tangential_force) / c.normal_force for c in pairs]
+            ratios.append([np.linalg.norm(c.tangential_force) / c.normal_force for c in pairs])
+            if force == 0.02:
+                peak = result
+    # unloading reverses the tangential motion: the sticking contacts shed tangential force at
+    # Mindlin's 4G*/E* tan θ of the normal force's fall, less than the T/N they carry, so T/N
+    # grows as N falls (0.0898 at 0.02 N, 0.0924 back at 0.01 N)
+    assert min(ratios[5]) > max(ratios[3])
+    assert all(c.state == "stick" for c in result.contacts if c.j == 1)
+    result, pairs = peak, [c for c in peak.contacts if c.j == 1]
+    ratio = ratios[3]
     one_go = [np.linalg.norm(c.tangential_force) / c.normal_force
               for c in check_two_contacts(whole, 3e-3, 0.02, 1, 0)]
     P, S = result.bodies[1], result.bodies[0]
