@@ -418,3 +418,26 @@ def test_nearly_frictionless_split_contacts_slide_and_carry_the_load_as_statics_
                                                                    rel=1e-6)
         assert c.normal_force == pytest.approx(
             0.02 / (2 * (math.cos(theta) + mu_pp * math.sin(theta))), rel=1e-4)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("radius", "turn"), [(3e-3, 15.0), (1e-3, 90.0)])
+def test_a_turned_potato_under_the_sphere_rests_on_two_contacts_too(radius, turn):
+    """The potato turned about z (its bumps off the plates' lattice axes): the same two
+    contacts along the bumps' own normals (checked in the potato's frame), their normal forces
+    within 0.3 % of the unturned potato's (the cells fall elsewhere on the bumps). 56 and 59
+    passes against 8 and 23 unturned (the learning attempt); the sphere of 1 mm on a potato
+    turned 37° fails at 60 cells per size (2.5e-2 after 31 passes) and converges at 90."""
+    potato, sphere = on_the_lower_plate(radius)
+    numerics = ClusterNumerics(resolution=60, tol=1e-5)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", HalfSpaceWarning)
+        plain = solve_cluster([potato, sphere], mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=0.02,
+                              numerics=numerics)
+        turned = solve_cluster(
+            [potato.moved(rotation=Rotation.from_euler("z", turn, degrees=True)), sphere],
+            mu_up=0.3, mu_low=0.3, mu_pp=0.3, force=0.02, numerics=numerics)
+    pairs = check_two_contacts(turned, radius, 0.02, 0, 1)
+    reference = [c.normal_force for c in plain.contacts if c.j == 1]
+    for c in pairs:
+        assert c.normal_force == pytest.approx(reference[0], rel=3e-3)
