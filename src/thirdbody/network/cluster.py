@@ -681,19 +681,31 @@ class _Problem:
             self.timings["narrow"] += t2 - t1
             for key, roles, hist, A, B, closest, warm, parts in todo:
                 members = []            # (key, closest approach, history or None, warm or None)
+                opened = []             # (key, approach) of the pair's contacts now open
                 for part in parts:
                     found = self._part_approach(part, A, B, last)
                     if found is not None and found.separation < 0:
                         old = self.histories.get(part)
                         members.append((part, found, None if old is None else old[1],
                                         last.get(part)))
+                    elif found is not None:
+                        opened.append((part, found))
                 if closest is not None and closest.separation < 0:
                     # first, unless it was found anew: then a known contact at the same place
                     # keeps its key and history
                     first = hist is not None or warm is not None
                     members.insert(0 if first else len(members),
                                    (key, closest, None if hist is None else hist[1], warm))
+                elif closest is not None:
+                    opened.insert(0, (key, closest))
                 members = _distinct(members, min(A.size, B.size))
+                # each contact of a split pair that opened stays known to the Newton step as
+                # an open contact at its own minimum of the gap (once, and not where a closed
+                # one lies), as an unsplit pair's open contact does
+                for _, c in _distinct(opened, min(A.size, B.size),
+                                      [c for _, c, _, _ in members]):
+                    potential.append(self._pair_potential(roles, A, B, c.separation, c.normal,
+                                                          c.midpoint))
                 count = 1 + max((p[3] for p in parts), default=0)
                 for _ in range(_SPLIT_ROUNDS):
                     points = [c.midpoint for _, c, _, _ in members]
