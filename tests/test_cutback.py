@@ -64,7 +64,7 @@ def _run(monkeypatch, steps, failing=(), cutbacks=3, kind="force", particle=FLAT
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         sim = tb.Simulation(particle, tb.Plates(0.6, 0.3), Steps(tuple(steps), kind),
-                            mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
+                            mu_pp=0.3, resolution=20, network_tol=1e-6, maps_every=0,
                             network_cutbacks=cutbacks)
         ds = sim.run()
     return sim, ds, len(calls)
@@ -231,7 +231,7 @@ def test_only_the_whole_step_and_the_deepest_cut_get_the_solvers_retries(monkeyp
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             sim = tb.Simulation(FLAT, tb.Plates(0.6, 0.3), Steps(tuple(CASES["sliding"][1])),
-                                mu_pp=0.3, resolution=20, network_tol=1e-5, maps_every=0,
+                                mu_pp=0.3, resolution=20, network_tol=1e-6, maps_every=0,
                                 network_cutbacks=cutbacks)
             sim.run()
         return sim.status, retries

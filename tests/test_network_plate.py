@@ -104,9 +104,9 @@ def test_a_step_left_with_contacts_below_a_cell_says_so():
                        match=r"nothing carries F_N = 0.002 N: the particles overlap the plates "
                              r"\(by up to .* m\), but by less than .*\(numerics\.resolution\)"):
         solve_cluster([body], mu_up=0.3, mu_low=0.3, force=0.002,
-                      numerics=ClusterNumerics(resolution=40, tol=1e-5))
+                      numerics=ClusterNumerics(resolution=40, tol=1e-6))
     result = solve_cluster([body], mu_up=0.3, mu_low=0.3, force=0.002,
-                           numerics=ClusterNumerics(resolution=80, tol=1e-5))
+                           numerics=ClusterNumerics(resolution=80, tol=1e-6))
     for c in result.contacts:
         assert c.spots == 2
         assert c.normal_force == pytest.approx(0.002, rel=1e-5)
