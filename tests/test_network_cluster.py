@@ -285,6 +285,40 @@ def test_a_particle_no_active_term_touches_takes_no_step_whatever_the_model_left
         assert moved >= 1e-6
 
 
+def test_a_trial_whose_contacts_cannot_be_solved_quarters_the_trust_radius(monkeypatch):
+    """A trial evaluation that raises (a contact solver that fails at the trial poses) is a
+    rejected trial: the pass is logged as not accepted, the trust radius is quartered and the
+    next trial is shorter. Two such failures planted in the column of two spheres: it still
+    converges, to the same forces, its log starting with the two rejections at radii 1 and
+    1/4. Failing every trial: the radius falls below ``min_radius`` and the error names the
+    trial poses and the solver's own message."""
+    from thirdbody.network import cluster
+
+    real = cluster._Problem.evaluate
+    failures = {"left": 2}
+
+    def flaky(self, centres, rotations, h, last):
+        if last is not None and failures["left"] > 0:
+            failures["left"] -= 1
+            raise RuntimeError("planted contact failure")
+        return real(self, centres, rotations, h, last)
+
+    monkeypatch.setattr(cluster._Problem, "evaluate", flaky)
+    numerics = ClusterNumerics(resolution=30, tol=1e-6)
+    result = solve_cluster(column(), mu_up=0.5, mu_low=0.5, mu_pp=0.5, force=F,
+                           numerics=numerics)
+    check_balanced(result)
+    assert failures["left"] == 0
+    assert [(h[2], h[3]) for h in result.history[:3]] == [(1.0, False), (0.25, False),
+                                                          (0.0625, True)]
+    for c in result.contacts:
+        assert c.normal_force == pytest.approx(F, rel=1e-6)
+    failures["left"] = 10**6
+    with pytest.raises(ClusterConvergenceError,
+                       match=r"could not be solved at the trial poses \(planted contact"):
+        solve_cluster(column(), mu_up=0.5, mu_low=0.5, mu_pp=0.5, force=F, numerics=numerics)
+
+
 def test_nine_pressed_spheres_under_gap_control_converge_as_one_does():
     """Nine identical spheres, 3R apart (no pair touches), resting on the lower plate as the
     upper one comes 4 µm into them: each is the sphere alone, pressed 2 µm at each plate
