@@ -701,10 +701,14 @@ def test_models_that_miss_the_bem_learn_from_it(monkeypatch):
     poses = []
     evaluate = cluster._Problem.evaluate
 
+    solves = []
+
     def recorded(self, centres, rotations, h, last):
         poses.append((np.array(centres).tobytes(), h,
                        np.array([r.as_rotvec() for r in rotations]).tobytes()))
-        return evaluate(self, centres, rotations, h, last)
+        ev = evaluate(self, centres, rotations, h, last)
+        solves.append(ev.solves)
+        return ev
 
     monkeypatch.setattr(cluster._Problem, "evaluate", recorded)
     corrected = []
@@ -719,6 +723,7 @@ def test_models_that_miss_the_bem_learn_from_it(monkeypatch):
     check_balanced(result)
     # two attempts used their whole budget first; the learnt corrections entered the model
     assert result.iterations == len(result.history) + 2 * budget
+    assert result.bem_solves == sum(solves)         # the failed attempts' solves included
     assert len(result.history) < budget and any(corrected)
     # a rejected trial that the trust region did not cut is not evaluated again unchanged
     assert all(a != b for a, b in itertools.pairwise(poses))
