@@ -9,6 +9,7 @@ The reference normals come from the potato's radial function (root finding along
 rays for its upper surface, then the point of each bump closest to the sphere's centre), not
 from the package's ray casting or narrow phase."""
 
+import functools
 import math
 import warnings
 
@@ -181,6 +182,14 @@ def on_the_lower_plate(radius: float) -> list[Body]:
             Body(b.shape, MAT, centre=b.centre + lift + [0.0, 0.0, DEPTH])]
 
 
+@functools.cache
+def resting_on_two_bumps():
+    """The sphere of 3 mm on the lower-plate potato's two bumps, solved once (0.02 N, 60 cells
+    per size, tol 1e-6; the result is immutable, its histories copied before any change)."""
+    return solve_cluster(on_the_lower_plate(3e-3), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
+                         force=0.02, numerics=ClusterNumerics(resolution=60, tol=1e-6))
+
+
 def check_two_contacts(result, radius: float, force: float, potato: int, sphere: int):
     """The sphere rests on two contacts, one per bump, each along that bump's own normal at
     the final poses (from the radial function, in the potato's frame), with one spot facing
@@ -310,8 +319,7 @@ def test_a_split_pair_whose_first_contact_opened_is_found_again():
     it had opened): the next step finds the bump again, by the global search, beside the split
     contact, which keeps its key and history."""
     numerics = ClusterNumerics(resolution=60, tol=1e-6)
-    first = solve_cluster(on_the_lower_plate(3e-3), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
-                          force=0.02, numerics=numerics)
+    first = resting_on_two_bumps()
     histories = {k: h for k, h in first.histories.items() if k != (0, 1, (0, 0))}
     assert (0, 1, (0, 0), 1) in histories
     with warnings.catch_warnings():
@@ -453,8 +461,7 @@ def test_a_split_contact_that_opened_stays_an_open_contact_of_the_newton_step(dx
     until a later pass split it off again."""
     from thirdbody.network import cluster
 
-    first = solve_cluster(on_the_lower_plate(3e-3), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
-                          force=0.02, numerics=ClusterNumerics(resolution=60, tol=1e-6))
+    first = resting_on_two_bumps()
     assert {(0, 1, (0, 0)), (0, 1, (0, 0), 1)} <= set(first.histories)
     problem = cluster._Problem(list(first.bodies), first.histories, 0.3, 0.3,
                                cluster._mu_function(0.3), None, 0.02, first.gap, (0.0, 0.0),
@@ -492,8 +499,7 @@ def test_a_split_pair_lifted_off_both_bumps_has_one_open_contact_per_bump(dx, kn
     other bump is unknown until it is the pair's nearest (a limit: docs/methods/network.md)."""
     from thirdbody.network import cluster
 
-    first = solve_cluster(on_the_lower_plate(3e-3), mu_up=0.3, mu_low=0.3, mu_pp=0.3,
-                          force=0.02, numerics=ClusterNumerics(resolution=60, tol=1e-6))
+    first = resting_on_two_bumps()
     histories = {k: h for k, h in first.histories.items() if k != (0, 1, (0, 0))}
     problem = cluster._Problem(list(first.bodies), histories, 0.3, 0.3,
                                cluster._mu_function(0.3), None, 0.02, first.gap, (0.0, 0.0),
