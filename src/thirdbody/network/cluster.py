@@ -1507,11 +1507,82 @@ def _newton_step(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
             step = step.copy()
             step[~touched] = 0.0
             model, active = _piecewise(problem, terms, R, plate, step, dh)[2:4]
+    if _WAY_BACK:
+        back = _way_back(problem, terms, R, plate, scale, translate, step, dh)
+        if back is not None:
+            step, model, active = back
     return step, dh, model, active
 
 
 #: the step of a particle that no active term touches is zero (False: as the passes left it)
 _REST_UNTOUCHED = True
+#: a group of particles that the passes leave stranded on the plateau of contacts that slid in
+#: the step takes the step that sticks them again (:func:`_way_back`; False: as the passes left
+#: it)
+_WAY_BACK = True
+#: a particle is stranded when the model at the passes' step keeps more than this share of its
+#: squared residual
+_STRANDED = 0.25
+
+
+def _way_back(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float, scale: float,
+              translate: bool, step: np.ndarray, dh: float):
+    """The step back for groups that the active-set passes leave stranded, or None.
+
+    A contact that slid in the step keeps μN until the motion has taken its slip back (the BEM
+    solves the step as one increment from its start), so its law has a plateau as long as the
+    slip. A particle that slid there (pushed by a neighbour that then moved away) and that
+    only sliding contacts hold has no stiffness along its slip on the plateau; the passes'
+    common halving of the step keeps it there (a half step back is still on the plateau, while
+    the stick-first step of the other groups overshoots), and its least-norm step is zero, pass
+    after pass. Measured: a 4 × 4 lattice of random radii apart by up to 3 µm (the closest
+    pair touching), loaded with 0.025 N a sphere; a sphere pushed 2.55 µm sideways by its
+    neighbour in the rotation-free phase was left sliding at both plates with 2μN unbalanced
+    when the neighbour moved back, and every attempt failed there at a scaled residual of
+    0.07. Here each such group (particles linked by active pair contacts in which some
+    particle keeps more than :data:`_STRANDED` of its squared residual in the model at the
+    passes' step, and has a sliding contact that slid in the step) takes the Newton step of
+    the model with its sliding contacts on their stick branch (the elastic predictor from the
+    start of the step), the other particles and the plate as the passes left them; kept
+    where the piecewise model's merit at the combined step is lower. Returns (step, model,
+    active)."""
+    models = terms.models
+    if not models.sliding.any():
+        return None
+    slid = terms.bem & models.sliding & (np.abs(models.back).max(axis=1) > 0)
+    if not slid.any():
+        return None
+    out, plate_out, _, active, laws = _piecewise(problem, terms, R, plate, step, dh)
+    merit = _merit(problem, out, plate_out, scale, translate)
+    w = _scaled(problem, np.ones_like(R), 0.0, 1.0)[0]
+    if translate:
+        w = w * np.hstack([np.ones(3), np.zeros(3)])
+    left, now = ((out * w) ** 2).sum(axis=1), ((R * w) ** 2).sum(axis=1)
+    stranded = (left > _STRANDED * now) & (now > 0)
+    holding = np.zeros(problem.n, dtype=bool)
+    holding[terms.a[slid]] = True
+    holding[terms.b[slid & terms.pair]] = True
+    stranded &= holding
+    if not stranded.any():
+        return None
+    pairs = active & terms.pair
+    groups = _components(problem.n, list(zip(terms.a[pairs].tolist(),
+                                             terms.b[pairs].tolist(), strict=True)))
+    moving = np.zeros(problem.n, dtype=bool)
+    for group in groups:
+        if stranded[group].any():
+            moving[group] = True
+    mine = moving[terms.a] | (terms.pair & moving[np.maximum(terms.b, 0)])
+    back_laws = laws.where(mine & models.sliding, models.elastic())
+    back_active = np.where(mine, terms.bem | active, active)
+    trial, _ = _solve_model(problem, _model(problem.n, terms, back_active, back_laws,
+                                            problem.correction), R, plate, translate)
+    combined = step.copy()
+    combined[moving] = trial[moving]
+    out, plate_out, model, active, _ = _piecewise(problem, terms, R, plate, combined, dh)
+    if _merit(problem, out, plate_out, scale, translate) >= merit:
+        return None
+    return combined, model, active
 
 #: a rejected trial that the trust region did not cut is not evaluated again at the quartered
 #: radius (the same poses): the radius is quartered on until it cuts the step
