@@ -20,31 +20,47 @@ seconds; at the end the converged share and the total CPU time of each variant. 
 step of a compression in 20, 10 or 5 steps): how the failures depend on how far the plate
 presses into the spread of the spheres' heights.
 
+``--start apart`` shrinks every radius by half the largest pair overlap (:func:`apart`): a
+start with no overlap, as a :class:`~thirdbody.layer.Layer` places them (the default start
+presses pairs up to 1.5 µm into each other, a prestressed start no placement produces).
+
 Variants: ``main`` is the solver before the switches below existed; ``default`` is the
-solver as shipped (``trial`` and ``entered`` on, ``lm`` off); ``lm``, ``entered`` and
-``trial`` add one each to ``main``: ``_LEVENBERG_MARQUARDT`` (the damped step of groups),
-``_ENTERED_BRANCHES`` (the re-solve on the branches a step enters) and ``_NO_DESCENT_TRIAL``
-(the BEM tries the Newton step that the model sees no descent along).
+solver as shipped (``trial``, ``entered`` and the way back on, ``lm`` off); ``noback`` is
+``default`` without ``_WAY_BACK`` (the step back of groups stranded on the plateau of
+contacts that slid in the step); ``lm``, ``entered`` and ``trial`` add one each to ``main``:
+``_LEVENBERG_MARQUARDT`` (the damped step of groups), ``_ENTERED_BRANCHES`` (the re-solve on
+the branches a step enters) and ``_NO_DESCENT_TRIAL`` (the BEM tries the Newton step that the
+model sees no descent along).
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 
+import numpy as np
+
 from cluster_lattice import lattice
-from thirdbody.network import cluster
+from thirdbody.network import Body, cluster
 from thirdbody.network.cluster import ClusterConvergenceError, ClusterNumerics, solve_cluster
+from thirdbody.shapes import Sphere
 
 VARIANTS = {
-    "main": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": False},
+    "main": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": False,
+             "_WAY_BACK": False},
     "default": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 2,
-                "_NO_DESCENT_TRIAL": True},
-    "lm": {"_LEVENBERG_MARQUARDT": True, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": False},
+                "_NO_DESCENT_TRIAL": True, "_WAY_BACK": True},
+    "noback": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 2,
+               "_NO_DESCENT_TRIAL": True, "_WAY_BACK": False},
+    "lm": {"_LEVENBERG_MARQUARDT": True, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": False,
+           "_WAY_BACK": False},
     "entered": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 2,
-                "_NO_DESCENT_TRIAL": False},
-    "trial": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": True},
-    "all": {"_LEVENBERG_MARQUARDT": True, "_ENTERED_BRANCHES": 2, "_NO_DESCENT_TRIAL": True},
+                "_NO_DESCENT_TRIAL": False, "_WAY_BACK": False},
+    "trial": {"_LEVENBERG_MARQUARDT": False, "_ENTERED_BRANCHES": 0, "_NO_DESCENT_TRIAL": True,
+              "_WAY_BACK": False},
+    "all": {"_LEVENBERG_MARQUARDT": True, "_ENTERED_BRANCHES": 2, "_NO_DESCENT_TRIAL": True,
+            "_WAY_BACK": True},
 }
 
 
@@ -57,10 +73,30 @@ def seeds(text: str) -> list[int]:
     return out
 
 
-def first_step(n: int, seed: int, factor: float = 1.0) -> tuple[bool, int, float]:
+def apart(bodies: list[Body], side: float) -> list[Body]:
+    """The lattice with every radius shrunk by half its largest pair overlap (nearest periodic
+    image), each sphere still standing on the lower plate: a start with no overlap, its
+    closest pair touching and the others apart by up to a few micrometres (a start a
+    :class:`~thirdbody.layer.Layer` accepts)."""
+    worst = 0.0
+    for a, b in itertools.combinations(range(len(bodies)), 2):
+        d = bodies[b].centre - bodies[a].centre
+        d[:2] -= side * np.round(d[:2] / side)
+        worst = max(worst, bodies[a].shape.radius + bodies[b].shape.radius
+                    - float(np.linalg.norm(d)))
+    # rounding must not leave the closest pair overlapping
+    cut = 0.5 * worst * (1.0 + 1e-9)
+    return [Body(Sphere(b.shape.radius - cut), b.material,
+                 centre=(b.centre[0], b.centre[1], b.shape.radius - cut)) for b in bodies]
+
+
+def first_step(n: int, seed: int, factor: float = 1.0,
+               start: str = "touching") -> tuple[bool, int, float]:
     """(converged, passes, CPU seconds) of the first compression step of one lattice, its load
-    (0.025 N a sphere) times ``factor``."""
+    (0.025 N a sphere) times ``factor``; ``start`` "apart": the lattice of :func:`apart`."""
     bodies, side = lattice(n, 5e-4, 0.0, seed)
+    if start == "apart":
+        bodies = apart(bodies, side)
     cpu = time.process_time()
     try:
         result = solve_cluster(bodies, {}, mu_up=0.3, mu_low=0.3, mu_pp=0.3,
@@ -80,6 +116,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--factors", type=float, nargs="+", default=[1.0],
                         help="the first step's load times each of these (default 1: 0.025 N "
                              "a sphere)")
+    parser.add_argument("--start", choices=["touching", "apart"], default="touching",
+                        help="touching: the spread presses pairs into each other (overlaps "
+                             "up to 1.5 µm at the start); apart: every radius shrunk by half "
+                             "the largest overlap (no overlap, the closest pair touching)")
     args = parser.parse_args(argv)
     saved = {name: getattr(cluster, name) for name in VARIANTS["main"]}
     # converged, cases, CPU s
@@ -92,7 +132,7 @@ def main(argv: list[str] | None = None) -> None:
                     for name, value in VARIANTS[variant].items():
                         setattr(cluster, name, value)
                     for factor in args.factors:
-                        ok, passes, cpu = first_step(n, seed, factor)
+                        ok, passes, cpu = first_step(n, seed, factor, args.start)
                         total = totals[(variant, factor)]
                         total[0] += ok
                         total[1] += 1
