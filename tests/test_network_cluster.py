@@ -1312,7 +1312,7 @@ def test_a_convergence_error_names_a_contact_past_the_half_space_limit():
 
     def ev(*ratios):
         return NS(contacts=[NS(key=(k, "lower"), contact=NS(half_space_ratio=r))
-                            for k, r in enumerate(ratios)])
+                            for k, r in enumerate(ratios)], potential=[])
 
     problem = NS(numerics=NS(half_space_limit=HALF_SPACE_LIMIT), user_key=lambda key: key,
                  beyond="")
@@ -1326,13 +1326,20 @@ def test_a_convergence_error_names_a_contact_past_the_half_space_limit():
     tilt = math.atan(HALF_SPACE_LIMIT)
     pairs = NS(contacts=[NS(key=(k, k + 1, (0, 0)), contact=NS(half_space_ratio=0.01,
                                                                 spot_tilt=t))
-                         for k, t in enumerate((0.5 * tilt, 1.5 * tilt, 1.2 * tilt))])
+                         for k, t in enumerate((0.5 * tilt, 1.5 * tilt, 1.2 * tilt))],
+               potential=[])
     text = cluster._beyond_half_space(problem, pairs)
     assert "contact (1, 2, (0, 0)) has a spot facing 8.57° away" in text
     assert "a/R" not in text and problem.beyond == text
     pairs.contacts.pop(1)
     pairs.contacts.pop(1)
     assert cluster._beyond_half_space(problem, pairs) == "" and problem.beyond == text
+    # open contacts that overlap by less than their cells resolve: counted, the deepest named
+    pairs.potential = [NS(roles=(0, "upper"), overlap=0.0), NS(roles=(3, "lower"), overlap=2e-7),
+                       NS(roles=(4, "upper"), overlap=1e-7)]
+    text = cluster._beyond_half_space(problem, pairs)
+    assert "2 contact(s) overlap by less than their cells resolve (the deepest, (3, 'lower'), " \
+           "by 2e-07 m" in text and "numerics.resolution" in text and problem.beyond == text
 
 
 # --- the secant predictor: a guess of the step's motion ----------------------------------------

@@ -9,12 +9,12 @@ import warnings
 
 import numpy as np
 import pytest
-from scipy.optimize import brentq
+from scipy.optimize import brentq, minimize_scalar
 
 import thirdbody as tb
 from thirdbody.network import Body
 from thirdbody.network.contact import HalfSpaceWarning
-from thirdbody.network.plate import solve_plate
+from thirdbody.network.plate import cell_separation, solve_plate
 from thirdbody.shapes import Sphere
 from thirdbody.shapes.potato import Potato, Wave
 
@@ -91,18 +91,20 @@ def test_a_one_spot_plate_contact_measures_at_its_pressure_centroid():
 
 def test_a_step_left_with_contacts_below_a_cell_says_so():
     """The two-bump potato alone between the plates, 0.002 N, at 40 cells per size (22 µm): its
-    bump tops lie between the centroid lattice's cell centres, the first Newton move leaves both
-    plates 1.8e-7 m into the shape, less than the sag to the nearest cell, and no cell touches.
-    The error says that (and what resolves it) instead of an infinite residual; at 80 cells
-    the step converges, with the load on two equal spots at each plate (the symmetry)."""
+    bump tops lie between the centroid lattice's cell centres, so a plate 1.6e-7 m into the
+    shape touches no cell (less than the sag to the nearest one): that contact's law jumps from
+    nothing to a cell's stiffness 5e-8 m further on, and the passes end with the upper plate
+    carrying F_N/2 and the lower one open. The error says that (and what resolves it); at 80
+    cells the step converges, with the load on two equal spots at each plate (the
+    symmetry)."""
     from thirdbody.network.cluster import ClusterConvergenceError, ClusterNumerics, solve_cluster
 
     shape = two_bumps()
     lowest = float(shape.lowest_point(Body(shape, MAT, centre=(0, 0, 0)).rotation)[2])
     body = Body(shape, MAT, centre=(0.0, 0.0, -lowest))
     with pytest.raises(ClusterConvergenceError,
-                       match=r"nothing carries F_N = 0.002 N: the particles overlap the plates "
-                             r"\(by up to .* m\), but by less than .*\(numerics\.resolution\)"):
+                       match=r"contact\(s\) overlap by less than their cells resolve \(the "
+                             r"deepest, \(0, '(lower|upper)'\), by .* m.*\(numerics\.resolution\)"):
         solve_cluster([body], mu_up=0.3, mu_low=0.3, force=0.002,
                       numerics=ClusterNumerics(resolution=40, tol=1e-6))
     result = solve_cluster([body], mu_up=0.3, mu_low=0.3, force=0.002,
@@ -127,3 +129,28 @@ def test_plates_that_left_every_particle_are_named():
         ": the plates have moved off every particle"
     assert "overlap the plates (by up to 0.0001 m)" in cluster._why_nothing_touches(
         problem(0.9e-3), ev)
+
+
+@pytest.mark.parametrize("depth", [1e-7, 3e-6])
+def test_a_plate_overlapping_between_the_cells_knows_how_far_they_are(depth):
+    """The two-bump potato overlapping the lower plate by ``depth`` at its lowest point, on a
+    lattice of 22 µm whose cells (at the centroid's x, y plus whole cells) miss the bump tops:
+    how much further the plate must rise before a cell centre touches is the smallest height
+    of the lower surface above the plate over the cells, from the radial function
+    (root finding along each cell's vertical, not the package's rays). At 0.1 µm no cell
+    touches (no contact: it is positive); at 3 µm some does (zero)."""
+    spacing = 22e-6
+    bottom = minimize_scalar(lambda x: lower_surface(x, 0.0), bounds=(0.05e-3, 0.6e-3),
+                             method="bounded", options={"xatol": 1e-12})
+    centre_z = -float(bottom.fun) - depth                   # lowest point at z = −depth
+    body = Body(two_bumps(), MAT, centre=(0.0, 0.0, centre_z))
+    heights = [centre_z + lower_surface(i * spacing, j * spacing)
+               for i in range(-25, 26) for j in range(-3, 4) if abs(i) > 3]
+    expected = max(min(heights), 0.0)
+    found = cell_separation(body, "lower", 0.0, spacing)
+    if depth < 1e-6:
+        assert solve_plate(body, "lower", plate=0.0, mu=0.3, spacing=spacing) is None
+        assert expected > 1e-8
+        assert found == pytest.approx(expected, rel=1e-6, abs=1e-15)
+    else:
+        assert expected == 0.0 and found == 0.0

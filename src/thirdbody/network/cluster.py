@@ -106,7 +106,7 @@ from .body import Body
 from .broad import candidate_pairs
 from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, PairContact, solve_contact
 from .narrow import closest_approach
-from .plate import PlateContact, solve_plate
+from .plate import PlateContact, cell_separation, solve_plate
 from .stiffness import ContactModel, ModelStack, TangentialLaws, cross, cross_rows
 
 __all__ = ["ClusterConvergenceError", "ClusterNumerics", "ClusterResult", "ContactHistory",
@@ -429,6 +429,8 @@ class _Potential:
     radius: float
     compliance: float               # Σ (2 − ν_i)/G_i, 1/Pa
     mu: float
+    #: the shapes overlap by ``overlap`` (m) but no cell of the contact's lattice touches
+    overlap: float = 0.0
 
 
 @dataclass
@@ -597,13 +599,8 @@ class _Problem:
                     fraction = 1.0
                     depth, extreme = _plate_depth(body, side, h)
                     if depth <= 0:
-                        point = body.centre + extreme
-                        point[2] = plate
-                        mat = body.material
-                        potential.append(_Potential(
-                            key, -depth, np.array([0.0, 0.0, -1.0 if side == "lower" else 1.0]),
-                            point, body.centre, point, mat.E_star, body.shape.feature_length,
-                            (2.0 - mat.nu) / mat.G, self.mu[side]))
+                        potential.append(self._plate_potential(key, body, extreme, plate,
+                                                               -depth))
                         continue
                     lever_start = None
                     if previous is None:
@@ -619,6 +616,12 @@ class _Problem:
                         half_space_limit=numerics.half_space_limit)
                     solves += 1
                     if solved is None:
+                        # overlapping by less than the cells resolve: an open contact,
+                        # apart by what its cells still miss (dropped, a potato resting on the
+                        # lower plate at 1e-19 m had no support in the model)
+                        potential.append(replace(self._plate_potential(
+                            key, body, extreme, plate,
+                            cell_separation(body, side, plate, self.cells[k])), overlap=depth))
                         continue
                     then = previous.lever if previous is not None else lever_start
                     model = _plate_model(solved).stepping(
@@ -736,6 +739,18 @@ class _Problem:
         scale = math.fsum(normals) / len(normals) if normals else 0.0
         return _Evaluation(np.array(centres, dtype=float), list(rotations), h, contacts,
                            potential, forces, moments, math.fsum(upper), scale, solves)
+
+    def _plate_potential(self, key, body: Body, extreme, plate: float,
+                         sigma: float) -> _Potential:
+        """The open contact ``key`` of ``body`` with a plate at height ``plate`` (m): its
+        extreme point ``extreme`` (from the centre) under the plate, separation ``sigma``."""
+        point = body.centre + extreme
+        point[2] = plate
+        mat = body.material
+        side = key[1]
+        return _Potential(key, sigma, np.array([0.0, 0.0, -1.0 if side == "lower" else 1.0]),
+                          point, body.centre, point, mat.E_star, body.shape.feature_length,
+                          (2.0 - mat.nu) / mat.G, self.mu[side])
 
     def _pair_potential(self, roles, A: Body, B: Body, sigma: float, normal, point):
         """An open pair contact, σ (m) apart along ``normal`` at ``point``: the pair's contact
@@ -2201,6 +2216,14 @@ def _beyond_half_space(problem: _Problem, ev: _Evaluation) -> str:
         out += (f"; contact {tilted} has a spot facing {math.degrees(tilt):.3g}° away from its "
                 f"normal, kept in its frame (too close to be a contact of its own): its force "
                 f"is taken along that normal")
+    below = [(p.overlap, problem.user_key(p.roles)) for p in ev.potential if p.overlap > 0]
+    if below:
+        depth, key = max(below, key=lambda t: t[0])
+        out += (f"; {len(below)} contact(s) overlap by less than their cells resolve (the "
+                f"deepest, {key}, by {depth:.3g} m: the surface's sag from its extreme point to "
+                f"the nearest cell centre is more), so their law jumps from nothing to a cell's "
+                f"stiffness: more cells per particle size (numerics.resolution) or a larger "
+                f"load step resolves them")
     problem.beyond = out or problem.beyond
     return out
 

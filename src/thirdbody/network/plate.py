@@ -58,7 +58,7 @@ from .contact import HALF_SPACE_LIMIT, HalfSpaceWarning, _centroid, _radii, _sol
 from .narrow import _smoothing
 from .window import Lattice, occupied
 
-__all__ = ["PlateContact", "PlateLattice", "solve_plate"]
+__all__ = ["PlateContact", "PlateLattice", "cell_separation", "solve_plate"]
 
 _SIDES = ("lower", "upper")
 _CATTANEO = ("Cattaneo, C. (1938). Sul contatto di due corpi elastici: distribuzione locale "
@@ -453,3 +453,21 @@ def _result(body, side, plate, window, normal, tangential, lever, increment, twi
         shift_increment=np.asarray(increment, dtype=float), twist=twist, slip=slip, mu=mu,
         normal_solution=normal, tangential_solution=tangential,
         methods=tuple(dict.fromkeys(methods)))
+
+
+def cell_separation(body: Body, side: str, plate: float, spacing: float) -> float:
+    """How much further the plate at height ``plate`` (m) must press into ``body`` before a cell
+    of its contact lattice (``spacing``, m) touches, m (>= 0; 0 when one touches): the smallest
+    gap g₀ of the cells next to the extreme point less the overlap. Where the shape overlaps
+    the plate by less than the surface's sag from its extreme point to the nearest cell centre,
+    :func:`solve_plate` finds no contact; this is the separation of that contact as the cells
+    see it, which the network's Newton step needs to know when it closes."""
+    lattice = PlateLattice(body, side, plate, spacing)
+    delta = -lattice.zero
+    corner, mask = lattice.candidates(max(delta, 0.0) + spacing)
+    jj, ii = np.nonzero(mask)
+    gaps = lattice.gap(ii + corner[0], jj + corner[1])
+    gaps = gaps[np.isfinite(gaps)]
+    if not gaps.size:
+        return math.inf
+    return max(float(gaps.min()) - delta, 0.0)
