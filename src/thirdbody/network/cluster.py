@@ -619,9 +619,10 @@ class _Problem:
                         # overlapping by less than the cells resolve: an open contact,
                         # apart by what its cells still miss (dropped, a potato resting on the
                         # lower plate at 1e-19 m had no support in the model)
-                        potential.append(replace(self._plate_potential(
-                            key, body, extreme, plate,
-                            cell_separation(body, side, plate, self.cells[k])), overlap=depth))
+                        sigma = cell_separation(body, side, plate, self.cells[k])
+                        if math.isfinite(sigma):
+                            potential.append(replace(self._plate_potential(
+                                key, body, extreme, plate, sigma), overlap=depth))
                         continue
                     then = previous.lever if previous is not None else lever_start
                     model = _plate_model(solved).stepping(
@@ -1598,6 +1599,7 @@ def _way_back(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float, sca
     if _merit(problem, out, plate_out, scale, translate) >= merit:
         return None
     return combined, model, active
+
 
 #: a rejected trial that the trust region did not cut is not evaluated again at the quartered
 #: radius (the same poses): the radius is quartered on until it cuts the step

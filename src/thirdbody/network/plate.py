@@ -461,7 +461,8 @@ def cell_separation(body: Body, side: str, plate: float, spacing: float) -> floa
     gap g₀ of the cells next to the extreme point less the overlap. Where the shape overlaps
     the plate by less than the surface's sag from its extreme point to the nearest cell centre,
     :func:`solve_plate` finds no contact; this is the separation of that contact as the cells
-    see it, which the network's Newton step needs to know when it closes."""
+    see it, which the network's Newton step needs to know when it closes. +inf when no ray
+    near the extreme point meets the surface."""
     lattice = PlateLattice(body, side, plate, spacing)
     delta = -lattice.zero
     corner, mask = lattice.candidates(max(delta, 0.0) + spacing)
