@@ -895,22 +895,62 @@ def test_mu_pp_as_a_table_or_a_function_is_the_number():
 
 # --- f: bad input, no convergence ------------------------------------------------------------
 @pytest.mark.parametrize(("kwargs", "match"), [
-    ({"gap": 4e-3, "force": 1.0}, "gap .* force"),
-    ({}, "gap .* force"),
-    ({"force": 1.0, "mu_up": -0.1}, "mu_up"),
-    ({"force": 1.0, "mu_low": float("nan")}, "mu_low"),
-    ({"force": 1.0, "mu_pp": -0.5}, "mu_pp"),
-    ({"force": -1.0}, "force"),
-    ({"gap": 0.0}, "gap"),
-    ({"force": 1.0, "box": (1e-2,)}, "box"),
-    ({"force": 1.0, "box": (1e-2, -1e-2)}, "box"),
-    ({"force": 1.0, "plate_shift": (1e-6,)}, "plate_shift"),
+    ({"gap": 4e-3, "force": 1.0}, r"^give exactly one of gap \(m\) and force \(N\)$"),
+    ({}, r"^give exactly one of gap \(m\) and force \(N\)$"),
+    ({"force": 1.0, "mu_up": -0.1}, r"^mu_up must be a finite number >= 0, got -0\.1$"),
+    ({"force": 1.0, "mu_low": float("nan")}, r"^mu_low must be a finite number >= 0"),
+    ({"force": 1.0, "mu_pp": -0.5}, r"^mu_pp must be a finite number >= 0"),
+    ({"force": -1.0}, r"^force must be a finite number > 0 N"),
+    ({"force": 0.0}, r"^force must be a finite number > 0 N"),
+    ({"gap": 0.0}, r"^gap must be a finite number > 0 m"),
+    ({"force": 1.0, "box": (1e-2,)}, r"^box must be two lengths"),
+    ({"force": 1.0, "box": (1e-2, -1e-2)}, r"^box must be two lengths"),
+    ({"force": 1.0, "box": (1e-2, 0.0)}, r"^box must be two lengths"),
+    ({"force": 1.0, "plate_shift": (1e-6,)}, r"^plate_shift must be a finite horizontal"),
+    ({"force": 1.0, "histories": {(0, "lower"): object()}},
+     r"^histories\[\(0, 'lower'\)\] must be the ContactHistory of that key$"),
 ])
 def test_bad_input_names_the_argument(kwargs, match):
-    """Checked before anything is solved: one sphere (no pair: μ_pp is still checked)."""
+    """Checked before anything is solved: one sphere (no pair: μ_pp is still checked). The
+    message starts with the argument's name (anchored: a name inside other text fails)."""
     kwargs = {"mu_up": 0.5, "mu_low": 0.5, **kwargs}
     with pytest.raises(ValueError, match=match):
         solve_cluster([sphere(0.0, R)], numerics=COARSE, **kwargs)
+
+
+def test_bad_bodies_and_histories_say_what_they_must_be():
+    """No bodies, a body that is not a Body, and a history filed under another key."""
+    kwargs = {"mu_up": 0.5, "mu_low": 0.5, "force": F, "numerics": COARSE}
+    with pytest.raises(ValueError, match=r"^bodies: a cluster needs at least one particle$"):
+        solve_cluster([], **kwargs)
+    with pytest.raises(TypeError, match=r"^bodies must be thirdbody\.network\.Body objects$"):
+        solve_cluster([Sphere(R)], **kwargs)
+    first = solve_cluster(column(), mu_pp=0.5, **kwargs)
+    lower = first.histories[(0, "lower")]
+    with pytest.raises(ValueError, match=r"^histories\[\(1, 'lower'\)\] must be the "
+                                         r"ContactHistory of that key$"):
+        solve_cluster(list(first.bodies), {(1, "lower"): lower}, **kwargs)
+
+
+def test_without_mu_pp_particles_touch_without_friction_and_gap_control_defaults_to_its_gap():
+    """Defaults: μ_pp = 0 (the column's pair contact has μ = 0 and no tangential force);
+    under gap control the step starts at its gap (``gap_start`` omitted is ``gap_start=gap``
+    to the bit, not the top of the particles: a sphere under a plate placed 2 µm into it and
+    shifted 1 µm turns by 5.00500e-4 rad, by 5.00250e-4 from the top); and a gap above every
+    particle leaves it free."""
+    pair = [c for c in solve_cluster(column(), mu_up=0.5, mu_low=0.5, force=F,
+                                     numerics=COARSE).contacts if not isinstance(c.j, str)]
+    assert len(pair) == 1 and pair[0].mu == 0.0
+    assert not np.abs(pair[0].tangential_force).any()
+    kwargs = {"mu_up": 0.5, "mu_low": 0.5, "plate_shift": (1e-6, 0.0), "numerics": COARSE}
+    gap = 2 * R - 2e-6
+    default = solve_cluster([sphere(0.0, R)], gap=gap, **kwargs)
+    placed = solve_cluster([sphere(0.0, R)], gap=gap, gap_start=gap, **kwargs)
+    lowered = solve_cluster([sphere(0.0, R)], gap=gap, gap_start=2 * R, **kwargs)
+    assert np.array_equal(default.rotation, placed.rotation)
+    assert abs(default.rotation[0, 1] - lowered.rotation[0, 1]) > 1e-4 * default.rotation[0, 1]
+    above = solve_cluster([sphere(0.0, R)], gap=3 * R, mu_up=0.5, mu_low=0.5, numerics=COARSE)
+    assert above.gap == 3 * R and not above.contacts and above.kinematics == ("free",)
 
 
 @pytest.mark.parametrize("name", ["resolution", "tol", "solver_tol", "radius", "min_radius",
@@ -1416,3 +1456,65 @@ def test_a_bad_guess_names_the_field(guess, match):
     with pytest.raises(ValueError, match=match):
         solve_cluster([tilted(-1.5e-3), tilted(1.5e-3)], mu_up=0.6, mu_low=0.6, force=F,
                       guess=guess)
+
+
+def test_the_attempts_of_a_step_and_what_their_failures_leave(monkeypatch):
+    """solve_cluster's attempts, the iteration replaced by a stand-in: the first (with the
+    rotation-free phase), then without that phase, then with learning models. When all fail,
+    the error is the first attempt's, with what only a later attempt found beyond the contact
+    model appended (not twice); ``retry=False`` stops at the first. When the last succeeds,
+    its passes and solves count the failed attempts' too."""
+    from thirdbody.network import cluster
+
+    real = cluster._iterate
+    calls = []
+
+    def stand_in(found="", succeed=False):
+        def attempt(problem, h, phase_one=True, learn=False, guess=None):
+            calls.append((phase_one, learn))
+            if learn and succeed:
+                return real(problem, h, phase_one=phase_one, learn=learn, guess=guess)
+            problem.phase_one_used = True
+            problem.failed = (3, 7)
+            if learn:
+                problem.beyond = found
+            raise ClusterConvergenceError(f"attempt {len(calls)}")
+        return attempt
+
+    kwargs = {"mu_up": 0.5, "mu_low": 0.5, "mu_pp": 0.5, "force": F, "numerics": COARSE}
+    note = "; contact (0, 'lower') has a/R = 0.42"
+    monkeypatch.setattr(cluster, "_iterate", stand_in(note))
+    with pytest.raises(ClusterConvergenceError) as info:
+        solve_cluster(column(), **kwargs)
+    assert str(info.value) == f"attempt 1 (later attempts{note})"
+    assert calls == [(True, False), (False, False), (True, True)]
+    calls.clear()
+    with pytest.raises(ClusterConvergenceError) as info:
+        solve_cluster(column(), retry=False, **kwargs)
+    assert str(info.value) == "attempt 1" and calls == [(True, False)]
+    # the note already in the first attempt's error: not appended again
+    calls.clear()
+    first_with_note = stand_in(note)
+
+    def noted(problem, h, phase_one=True, learn=False, guess=None):
+        try:
+            return first_with_note(problem, h, phase_one, learn, guess)
+        except ClusterConvergenceError as exc:
+            if not calls[1:]:
+                raise ClusterConvergenceError(f"{exc}{note}") from None
+            raise
+
+    monkeypatch.setattr(cluster, "_iterate", noted)
+    with pytest.raises(ClusterConvergenceError) as info:
+        solve_cluster(column(), **kwargs)
+    assert str(info.value) == f"attempt 1{note}"
+    # the last attempt succeeds: two failed attempts of 3 passes and 7 solves each counted
+    monkeypatch.setattr(cluster, "_iterate", real)
+    alone = solve_cluster(column(), **kwargs)
+    calls.clear()
+    monkeypatch.setattr(cluster, "_iterate", stand_in(succeed=True))
+    result = solve_cluster(column(), **kwargs)
+    assert calls == [(True, False), (False, False), (True, True)]
+    assert result.gap == alone.gap
+    assert result.iterations == alone.iterations + 6
+    assert result.bem_solves == alone.bem_solves + 14
