@@ -154,3 +154,40 @@ def test_a_plate_overlapping_between_the_cells_knows_how_far_they_are(depth):
         assert found == pytest.approx(expected, rel=1e-6, abs=1e-15)
     else:
         assert expected == 0.0 and found == 0.0
+
+
+def test_a_plate_between_the_cells_is_an_open_contact_of_the_step():
+    """The network's evaluation of the potato 0.1 µm into the lower plate on cells of 22 µm
+    (the upper plate 0.5 mm above it): no contact is solved, and both plates are open contacts
+    of the Newton step. The lower one: apart by the cells' smallest height above the plate
+    (from the radial function, as above), the overlap 0.1 µm, normal −z, at the lowest point
+    (a bump top, x = ±0.318 mm by the formula) on the plate, with the potato's E*, (2 − ν)/G
+    and μ_low. Dropped, the Newton model held nothing there (docs/methods/network.md)."""
+    from thirdbody.network import cluster
+    from thirdbody.network.cluster import ClusterNumerics
+
+    spacing, depth = 22e-6, 1e-7
+    bottom = minimize_scalar(lambda x: lower_surface(x, 0.0), bounds=(0.05e-3, 0.6e-3),
+                             method="bounded", options={"xatol": 1e-12})
+    centre_z = -float(bottom.fun) - depth
+    body = Body(two_bumps(), MAT, centre=(0.0, 0.0, centre_z))
+    heights = [centre_z + lower_surface(i * spacing, j * spacing)
+               for i in range(-25, 26) for j in range(-3, 4) if abs(i) > 3]
+    top = centre_z + AXES[2] * 1.2                       # above the potato's top
+    gap = top + 0.5e-3
+    problem = cluster._Problem([body], {}, 0.4, 0.2, cluster._mu_function(0.0), gap, None, gap,
+                               (0.0, 0.0), None, ClusterNumerics(cell_size=spacing))
+    ev = problem.evaluate(np.array([body.centre]), [body.rotation], gap, None)
+    assert not ev.contacts
+    lower = {p.roles[1]: p for p in ev.potential}["lower"]
+    assert lower.roles == (0, "lower")
+    assert lower.sigma == pytest.approx(min(heights), rel=1e-6)
+    assert lower.overlap == pytest.approx(depth, rel=1e-6)
+    np.testing.assert_array_equal(lower.normal, [0.0, 0.0, -1.0])
+    assert abs(abs(lower.point[0]) - float(bottom.x)) < 1e-6 and lower.point[2] == 0.0
+    np.testing.assert_array_equal(lower.centre_a, body.centre)
+    assert lower.E_star == MAT.E_star and lower.mu == 0.2
+    assert lower.compliance == pytest.approx((2 - MAT.nu) / MAT.G, rel=1e-15)
+    upper = {p.roles[1]: p for p in ev.potential}["upper"]
+    np.testing.assert_array_equal(upper.normal, [0.0, 0.0, 1.0])
+    assert upper.overlap == 0.0 and upper.mu == 0.4 and upper.point[2] == gap
