@@ -1518,3 +1518,25 @@ def test_the_attempts_of_a_step_and_what_their_failures_leave(monkeypatch):
     assert result.gap == alone.gap
     assert result.iterations == alone.iterations + 6
     assert result.bem_solves == alone.bem_solves + 14
+
+
+def test_bem_solves_counts_every_contact_solve(monkeypatch):
+    """``bem_solves`` is the number of BEM contact solves the step ran: every call of the plate
+    and the pair solvers, counted by spies (the column: two plate contacts and a pair, every
+    pass; the groove: a sphere on two, with open contacts that are not solved)."""
+    from thirdbody.network import cluster
+
+    calls = []
+    for name in ("solve_plate", "solve_contact"):
+        real = getattr(cluster, name)
+
+        def spy(*args, _real=real, **kwargs):
+            calls.append(1)
+            return _real(*args, **kwargs)
+
+        monkeypatch.setattr(cluster, name, spy)
+    for bodies in (column(), column(5e-6)):
+        calls.clear()
+        result = solve_cluster(bodies, mu_up=0.5, mu_low=0.5, mu_pp=0.5, force=F,
+                               numerics=COARSE)
+        assert result.bem_solves == len(calls) > 0
