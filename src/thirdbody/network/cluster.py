@@ -1443,6 +1443,7 @@ def _newton_step(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
     step, dh = np.zeros((n, 6)), 0.0
     out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate, step, dh)
     merit = start_merit = _merit(problem, out, plate_out, scale, translate)
+    at_step = (out, plate_out, active, laws)       # the piecewise model at ``step``
     # a sliding contact starts on its stick branch (the elastic predictor from the start of
     # the step): on the slide branch it has no stiffness along its slip, so a particle whose
     # only way out is to roll back (a sphere under a plate that moved by more than the slip
@@ -1489,7 +1490,9 @@ def _newton_step(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
                     # the model's merit has a kink at the start along the step: the BEM
                     # decides (the trust region cuts the step until a trial descends)
                     step, dh = trial, trial_dh
-                    model, active = _piecewise(problem, terms, R, plate, step, dh)[2:4]
+                    out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate,
+                                                                     step, dh)
+                    at_step = (out, plate_out, active, laws)
                 break       # not even the step's own Newton step lowers the model's merit
             # the start's branches (or the last pass's) lead nowhere from here: the Newton
             # step of the model at the step's own branches, a descent direction of its merit
@@ -1498,6 +1501,7 @@ def _newton_step(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
             continue
         step, dh, merit = cand, cand_dh, cand_merit
         model, active, laws = cand_model, cand_active, cand_laws
+        at_step = (out, plate_out, active, laws)
         if t == 1.0 and np.array_equal(cand_active, used[0]) and _same(cand_laws, used[1]):
             break           # the step's own branches: the piecewise model's root
         if merit <= _MODEL_ROOT * start_merit:
@@ -1522,9 +1526,10 @@ def _newton_step(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float,
         if step[~touched].any():
             step = step.copy()
             step[~touched] = 0.0
-            model, active = _piecewise(problem, terms, R, plate, step, dh)[2:4]
+            out, plate_out, model, active, laws = _piecewise(problem, terms, R, plate, step, dh)
+            at_step = (out, plate_out, active, laws)
     if _WAY_BACK:
-        back = _way_back(problem, terms, R, plate, scale, translate, step, dh)
+        back = _way_back(problem, terms, R, plate, scale, translate, step, dh, at_step)
         if back is not None:
             step, model, active = back
     return step, dh, model, active
@@ -1542,7 +1547,7 @@ _STRANDED = 0.25
 
 
 def _way_back(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float, scale: float,
-              translate: bool, step: np.ndarray, dh: float):
+              translate: bool, step: np.ndarray, dh: float, at_step: tuple):
     """The step back for groups that the active-set passes leave stranded, or None.
 
     A contact that slid in the step keeps μN until the motion has taken its slip back (the BEM
@@ -1560,15 +1565,16 @@ def _way_back(problem: _Problem, terms: _Terms, R: np.ndarray, plate: float, sca
     passes' step, and has a sliding contact that slid in the step) takes the Newton step of
     the model with its sliding contacts on their stick branch (the elastic predictor from the
     start of the step), the other particles and the plate as the passes left them; kept
-    where the piecewise model's merit at the combined step is lower. Returns (step, model,
-    active)."""
+    where the piecewise model's merit at the combined step is lower. ``at_step``: the piecewise
+    model at ``step`` (residual, plate residual, active set, laws), as the passes left it.
+    Returns (step, model, active)."""
     models = terms.models
     if not models.sliding.any():
         return None
     slid = terms.bem & models.sliding & (np.abs(models.back).max(axis=1) > 0)
     if not slid.any():
         return None
-    out, plate_out, _, active, laws = _piecewise(problem, terms, R, plate, step, dh)
+    out, plate_out, active, laws = at_step
     merit = _merit(problem, out, plate_out, scale, translate)
     w = _scaled(problem, np.ones_like(R), 0.0, 1.0)[0]
     if translate:
